@@ -1,0 +1,522 @@
+"""TOML -> typed config.
+
+Every section is a dataclass; the loader checks every key against it. An unknown key is an
+error that names the file, the line and the nearest known key. Types are checked (an ``int`` is
+accepted where a ``float`` is expected), ``Literal`` choices are enforced, and nested sections
+and arrays of tables (``[[lighting.lights]]``) are typed too.
+
+``--set section.key=value`` overrides go through the same checks (the value is parsed as a TOML
+value, falling back to a bare string).
+
+Stage owners add their keys to their own section class below; nothing else needs to change.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import re
+import sys
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Optional, Union, get_args, get_origin, get_type_hints
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .errors import ConfigError
+
+
+# --------------------------------------------------------------------------- sections
+@dataclass
+class InputConfig:
+    path: str = ""  # model file, relative to the config file
+    format: Literal["auto", "obj", "gltf", "glb"] = "auto"
+
+
+@dataclass
+class ImportConfig:
+    # strict = true: a bad face (index 0, out of range, < 3 vertices) is an error naming file
+    # and line. false: a warning and the face is dropped.
+    strict: bool = True
+    # glTF: which scene (-1 = the file's default scene, else scenes[0]).
+    scene: int = -1
+
+
+@dataclass
+class TransformConfig:
+    up: Literal["y", "z", "-y", "-z", "x", "-x"] = "y"  # the source file's up axis
+    # Target frame. "left": x right, y up, z into the screen (most Scratch engines).
+    # "right": x right, y up, z towards the viewer (OBJ / glTF convention).
+    frame: Literal["left", "right"] = "left"
+    scale: float = 1.0
+    # Fit the model so its largest bbox side is this long (0 = keep size; applied after scale).
+    fit: float = 0.0
+    center: Literal["none", "bounds", "base"] = "none"  # base: centred on x/z, resting on y=0
+
+
+@dataclass
+class TriangulateConfig:
+    # fan: the book's fan from the first vertex (right for convex planar polygons).
+    # auto: fan where it is valid, ear clipping on the best-fit plane where it is not.
+    method: Literal["auto", "fan"] = "auto"
+
+
+@dataclass
+class CleanConfig:
+    enabled: bool = True
+    weld: bool = True
+    # Weld tolerance as a fraction of the bbox diagonal (0 = exact duplicates only).
+    weld_tolerance: float = 1e-7
+    drop_degenerate: bool = True
+    # A triangle whose area is below this fraction of diagonal^2 is dropped.
+    area_tolerance: float = 1e-14
+    drop_unused_vertices: bool = True
+
+
+@dataclass
+class SimplifyConfig:
+    enabled: bool = False
+    target_triangles: int = 0  # 0 = not set
+    target_ratio: float = 0.0  # 0 = not set
+    max_error: float = 0.0  # fraction of the bbox diagonal; 0 = not set
+    method: str = "fast"
+    preserve_border: bool = True
+    preserve_materials: bool = True
+    measure_error: bool = True
+    error_samples: int = 20000
+    seed: int = 0
+
+
+@dataclass
+class MeshConfig:
+    triangulate: TriangulateConfig = field(default_factory=TriangulateConfig)
+    clean: CleanConfig = field(default_factory=CleanConfig)
+    simplify: SimplifyConfig = field(default_factory=SimplifyConfig)
+
+
+@dataclass
+class BSPConfig:
+    enabled: bool = False
+    candidates: int = 64  # candidate planes sampled per node (0 = all)
+    split_weight: float = 8.0
+    balance_weight: float = 1.0
+    coplanar_weight: float = 0.0
+    seed: int = 0
+
+
+@dataclass
+class BVHConfig:
+    enabled: bool = False
+    leaf_size: int = 4
+    bins: int = 8
+    quality: Literal["binned", "high"] = "binned"
+    layout: Literal["binary", "wide4", "quantised"] = "binary"
+
+
+@dataclass
+class LightConfig:
+    kind: Literal["sun", "point", "spot"] = "sun"
+    color: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.0])
+    intensity: float = 1.0
+    direction: list[float] = field(default_factory=lambda: [-0.3, -1.0, 0.4])  # light -> scene
+    position: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    angle: float = 0.53  # sun angular diameter, degrees
+    radius: float = 0.0  # point / spot size
+    inner_cone: float = 0.0  # degrees
+    outer_cone: float = 45.0  # degrees
+    range: float = 0.0  # 0 = unbounded
+
+
+@dataclass
+class AOConfig:
+    enabled: bool = False
+    samples: int = 64
+    distance: float = 0.25  # fraction of the bbox diagonal
+    strength: float = 1.0
+
+
+@dataclass
+class SkyConfig:
+    enabled: bool = False
+    color: list[float] = field(default_factory=lambda: [0.6, 0.7, 0.9])
+    horizon: list[float] = field(default_factory=lambda: [0.6, 0.7, 0.9])  # gradient bottom
+    intensity: float = 1.0
+    samples: int = 64
+
+
+@dataclass
+class BouncesConfig:
+    count: int = 0
+    samples: int = 64
+
+
+@dataclass
+class ShadowsConfig:
+    enabled: bool = True
+    samples: int = 16  # rays per light per point for soft shadows
+
+
+@dataclass
+class LightingConfig:
+    enabled: bool = False
+    target: Literal["vertex", "triangle", "lightmap"] = "vertex"
+    ambient: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    exposure: float = 1.0
+    import_lights: bool = True  # KHR_lights_punctual from glTF
+    threads: int = 0  # 0 = all cores
+    seed: int = 0
+    lights: list[LightConfig] = field(default_factory=list)
+    ao: AOConfig = field(default_factory=AOConfig)
+    sky: SkyConfig = field(default_factory=SkyConfig)
+    shadows: ShadowsConfig = field(default_factory=ShadowsConfig)
+    bounces: BouncesConfig = field(default_factory=BouncesConfig)
+
+
+@dataclass
+class TexturesConfig:
+    enabled: bool = False
+
+
+@dataclass
+class ListNames:
+    vertices: str = "verts"
+    triangles: str = "tris"
+    materials: str = "mat colors"
+    triangle_colors: str = "tri colors"
+    vertex_colors: str = "vert colors"
+    uvs: str = "tri uvs"
+    quads: str = "quads"
+    ngons: str = "ngons"
+    ngon_sizes: str = "ngon sizes"
+
+
+@dataclass
+class ExportConfig:
+    enabled: bool = True
+    # Which mesh lists to write. "auto" colour lists are written when the scene has colours.
+    vertices: bool = True
+    triangles: bool = True
+    materials: bool = True
+    triangle_colors: Literal["auto", "yes", "no"] = "auto"
+    vertex_colors: Literal["auto", "yes", "no"] = "auto"
+    uvs: Literal["auto", "yes", "no"] = "auto"
+    # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
+    # Ngons lists); polygons that cannot be kept whole are written as triangles.
+    faces: Literal["triangles", "quads", "ngons"] = "triangles"
+    # Positions are rounded to this many significant digits of the model's size: a step of
+    # diagonal * 10^-precision.
+    precision: int = 5
+    color_format: Literal["rgb", "argb", "hex"] = "rgb"
+    names: ListNames = field(default_factory=ListNames)
+    txt: bool = True
+    json: bool = True
+    json_name: str = "lists.json"
+
+
+@dataclass
+class ReportConfig:
+    strict: bool = False  # an exceeded limit makes the bake exit non-zero
+
+
+@dataclass
+class Config:
+    input: InputConfig = field(default_factory=InputConfig)
+    import_: ImportConfig = field(default_factory=ImportConfig)
+    transform: TransformConfig = field(default_factory=TransformConfig)
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    bsp: BSPConfig = field(default_factory=BSPConfig)
+    bvh: BVHConfig = field(default_factory=BVHConfig)
+    lighting: LightingConfig = field(default_factory=LightingConfig)
+    textures: TexturesConfig = field(default_factory=TexturesConfig)
+    export: ExportConfig = field(default_factory=ExportConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
+    # Where the config came from (not a TOML key): paths in it are relative to this folder.
+    base_dir: Path = field(default_factory=Path.cwd, metadata={"internal": True})
+    source: Path | None = field(default=None, metadata={"internal": True})
+
+
+@dataclass(frozen=True)
+class ImportJob:
+    """The import stage's section, derived from ``[input]`` and ``[import]``."""
+
+    path: Path
+    format: str = "auto"
+    strict: bool = True
+    scene: int = -1
+
+
+# TOML names that are Python keywords.
+_ALIASES = {"import": "import_"}
+_REVERSE = {v: k for k, v in _ALIASES.items()}
+
+
+# --------------------------------------------------------------------------- loading
+def _toml_name(attr: str) -> str:
+    return _REVERSE.get(attr, attr)
+
+
+def _fields(cls: type) -> dict[str, dataclasses.Field]:
+    return {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
+
+
+def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
+    """Every dotted key the config accepts (for suggestions and docs)."""
+    hints = get_type_hints(cls)
+    out = []
+    for name in _fields(cls):
+        key = prefix + _toml_name(name)
+        t = hints[name]
+        if dataclasses.is_dataclass(t):
+            out.extend(all_keys(t, key + "."))
+        else:
+            out.append(key)
+    return out
+
+
+def _suggest(key: str, candidates: list[str]) -> str:
+    close = difflib.get_close_matches(key, candidates, n=1, cutoff=0.5)
+    if not close:
+        # try the last component against the last components
+        last = key.rsplit(".", 1)[-1]
+        by_last = {c.rsplit(".", 1)[-1]: c for c in candidates}
+        m = difflib.get_close_matches(last, list(by_last), n=1, cutoff=0.6)
+        close = [by_last[m[0]]] if m else []
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+class _Where:
+    """Finds the line of a dotted key in the TOML text, for messages."""
+
+    def __init__(self, text: str | None, path: Path | None):
+        self.lines = text.splitlines() if text else []
+        self.path = path
+
+    def line_of(self, key: str) -> int | None:
+        if not self.lines:
+            return None
+        parts = key.split(".")
+        last = re.escape(parts[-1].split("[")[0])
+        section = ".".join(parts[:-1])
+        current = ""
+        found = None
+        for i, raw in enumerate(self.lines, 1):
+            s = raw.strip()
+            m = re.match(r"^\[\[?\s*([^\]]+?)\s*\]?\]$", s)
+            if m:
+                current = m.group(1).replace(" ", "")
+                if current == key:
+                    return i
+                continue
+            if re.match(rf"^{last}\s*=", s) or re.match(rf"^[\w.]*\.{last}\s*=", s):
+                if current == section or section.endswith(current) or not section or \
+                        s.startswith(section.split(".", 1)[-1]):
+                    return i
+                if found is None:
+                    found = i
+        return found
+
+    def error(self, key: str, msg: str) -> ConfigError:
+        return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
+
+
+def _type_name(t: Any) -> str:
+    if get_origin(t) is Literal:
+        return "one of " + ", ".join(repr(a) for a in get_args(t))
+    if get_origin(t) in (list, typing.List):
+        (inner,) = get_args(t) or (Any,)
+        return f"a list of {_type_name(inner)}"
+    if isinstance(t, type):
+        return {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false"}.get(
+            t.__name__, t.__name__)
+    return str(t)
+
+
+def _convert(value: Any, t: Any, key: str, where: _Where) -> Any:
+    origin = get_origin(t)
+    if origin in (Union, types.UnionType):
+        args = [a for a in get_args(t) if a is not type(None)]
+        if value is None:
+            return None
+        return _convert(value, args[0], key, where)
+    if origin is Literal:
+        choices = get_args(t)
+        if value not in choices:
+            sugg = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+            hint = f"; did you mean {sugg[0]!r}?" if sugg else ""
+            raise where.error(key, f"expected {_type_name(t)}, got {value!r}{hint}")
+        return value
+    if origin in (list, typing.List):
+        (inner,) = get_args(t) or (Any,)
+        if not isinstance(value, list):
+            raise where.error(key, f"expected {_type_name(t)}, got {type(value).__name__} {value!r}")
+        return [_convert(v, inner, f"{key}[{i}]", where) for i, v in enumerate(value)]
+    if dataclasses.is_dataclass(t):
+        if not isinstance(value, dict):
+            raise where.error(key, f"expected a table [{key}], got {value!r}")
+        return _build(t, value, key + ".", where)
+    if t is bool:
+        if not isinstance(value, bool):
+            raise where.error(key, f"expected true or false, got {value!r}")
+        return value
+    if t is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise where.error(key, f"expected an integer, got {value!r}")
+        return value
+    if t is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise where.error(key, f"expected a number, got {value!r}")
+        f = float(value)
+        if f != f or f in (float("inf"), float("-inf")):
+            raise where.error(key, f"expected a finite number, got {value!r}")
+        return f
+    if t is str:
+        if not isinstance(value, str):
+            raise where.error(key, f"expected a string, got {value!r}")
+        return value
+    return value
+
+
+def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) -> Any:
+    fields = _fields(cls)
+    hints = get_type_hints(cls)
+    obj = base if base is not None else cls()
+    for raw_key, value in data.items():
+        attr = _ALIASES.get(raw_key, raw_key)
+        key = prefix + raw_key
+        if attr not in fields:
+            known = all_keys(Config)
+            sub = [k for k in known if k.startswith(prefix)] if prefix else known
+            raise where.error(key, "unknown key" + _suggest(key, sub or known))
+        t = hints[attr]
+        if dataclasses.is_dataclass(t) and isinstance(value, dict):
+            setattr(obj, attr, _build(t, value, key + ".", where, base=getattr(obj, attr)))
+        else:
+            setattr(obj, attr, _convert(value, t, key, where))
+    return obj
+
+
+def load(path: str | Path | None = None, overrides: list[str] | None = None,
+         data: dict | None = None) -> Config:
+    """Load a config file (or none: defaults), then apply ``key=value`` overrides."""
+    text = None
+    src = None
+    if path is not None:
+        src = Path(path)
+        try:
+            raw = src.read_bytes()
+        except OSError as e:
+            raise ConfigError(f"cannot read config: {e.strerror}", path=src) from None
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise ConfigError(f"config is not UTF-8 text (byte {e.start})", path=src) from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as e:
+            m = re.search(r"line (\d+)", str(e))
+            raise ConfigError(f"not valid TOML: {e}", path=src,
+                              line=int(m.group(1)) if m else None) from None
+    cfg = _build(Config, data or {}, "", _Where(text, src))
+    if src is not None:
+        cfg.base_dir = src.resolve().parent
+        cfg.source = src.resolve()
+    for ov in overrides or []:
+        apply_override(cfg, ov)
+    validate(cfg)
+    return cfg
+
+
+def parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_override(cfg: Config, assignment: str) -> None:
+    """Apply ``section.key=value`` (value parsed as TOML, else a string)."""
+    if "=" not in assignment:
+        raise ConfigError(f"--set expects section.key=value, got {assignment!r}")
+    key, text = assignment.split("=", 1)
+    key = key.strip()
+    parts = key.split(".")
+    nested: dict = {}
+    cur = nested
+    for p in parts[:-1]:
+        cur = cur.setdefault(p, {})
+    cur[parts[-1]] = parse_value(text.strip())
+    where = _Where(None, None)
+    _build(Config, nested, "", where, base=cfg)
+
+
+def get_key(cfg: Config, key: str) -> Any:
+    obj: Any = cfg
+    for p in key.split("."):
+        attr = _ALIASES.get(p, p)
+        if not dataclasses.is_dataclass(obj) or attr not in _fields(type(obj)):
+            raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
+        obj = getattr(obj, attr)
+    return obj
+
+
+def validate(cfg: Config) -> None:
+    """Range checks that types alone cannot express."""
+    def need(cond: bool, key: str, msg: str) -> None:
+        if not cond:
+            raise ConfigError(msg, path=cfg.source, key=key)
+
+    need(cfg.transform.scale > 0, "transform.scale", "must be > 0")
+    need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
+    need(cfg.mesh.clean.weld_tolerance >= 0, "mesh.clean.weld_tolerance", "must be >= 0")
+    need(1 <= cfg.export.precision <= 15, "export.precision", "must be between 1 and 15")
+    s = cfg.mesh.simplify
+    need(s.target_triangles >= 0, "mesh.simplify.target_triangles", "must be >= 0")
+    need(0 <= s.target_ratio <= 1, "mesh.simplify.target_ratio", "must be between 0 and 1")
+    need(s.max_error >= 0, "mesh.simplify.max_error", "must be >= 0")
+    need(cfg.bvh.leaf_size >= 1, "bvh.leaf_size", "must be >= 1")
+    need(cfg.bvh.bins >= 2, "bvh.bins", "must be >= 2")
+    need(cfg.bsp.candidates >= 0, "bsp.candidates", "must be >= 0 (0 = all)")
+    need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
+    need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
+    for i, lt in enumerate(cfg.lighting.lights):
+        need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
+        need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")
+        need(len(lt.position) == 3, f"lighting.lights[{i}].position", "must be [x, y, z]")
+
+
+def to_dict(obj: Any) -> Any:
+    """The config as plain data (TOML names), for the report."""
+    if dataclasses.is_dataclass(obj):
+        return {_toml_name(f): to_dict(getattr(obj, f)) for f in _fields(type(obj))}
+    if isinstance(obj, list):
+        return [to_dict(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def numeric_keys() -> list[str]:
+    """Keys whose value is an int or float (what ``bake sweep --vary`` accepts)."""
+    out = []
+
+    def walk(cls: type, prefix: str) -> None:
+        hints = get_type_hints(cls)
+        for name in _fields(cls):
+            t = hints[name]
+            key = prefix + _toml_name(name)
+            if dataclasses.is_dataclass(t):
+                walk(t, key + ".")
+            elif t in (int, float):
+                out.append(key)
+
+    walk(Config, "")
+    return out
+
+
+__all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "to_dict", "numeric_keys",
+           "parse_value", "Optional"]

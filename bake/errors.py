@@ -1,0 +1,54 @@
+"""Errors that reach the user as one line: where (file, line or key) and what was expected.
+
+Exit statuses (documented in README.md):
+  0  success
+  1  internal error (a bug; rerun with --debug for the traceback)
+  2  bad command line or config (unknown key, wrong type, bad value)
+  3  bad input file (unreadable, malformed, out of range, NaN/Inf, unsafe archive)
+  4  a Scratch limit was exceeded under --strict
+  5  a stage failed on valid input (e.g. an external tool crashed or timed out)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class BakeError(Exception):
+    """An error with a place. ``str(err)`` is the one-line message shown to the user."""
+
+    exit_code = 1
+
+    def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None,
+                 key: str | None = None):
+        self.message = message
+        self.path = Path(path) if path is not None else None
+        self.line = line
+        self.key = key
+        super().__init__(self.format())
+
+    def format(self) -> str:
+        where = ""
+        if self.path is not None:
+            where = str(self.path)
+            if self.line is not None:
+                where += f":{self.line}"
+        if self.key is not None:
+            where = f"{where}: key '{self.key}'" if where else f"key '{self.key}'"
+        return f"{where}: {self.message}" if where else self.message
+
+
+class ConfigError(BakeError):
+    exit_code = 2
+
+
+class InputError(BakeError):
+    exit_code = 3
+
+
+class LimitError(BakeError):
+    exit_code = 4
+
+
+class StageError(BakeError):
+    exit_code = 5

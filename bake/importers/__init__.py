@@ -1,0 +1,34 @@
+"""Importers: OBJ (+MTL) and glTF/GLB into a :class:`~bake.scene.Scene` (polygons kept)."""
+
+from __future__ import annotations
+
+from ..config import ImportJob
+from ..errors import InputError
+from ..record import StageRecord
+from ..scene import Scene
+
+FORMATS = {".obj": "obj", ".gltf": "gltf", ".glb": "glb"}
+
+
+def detect_format(job: ImportJob) -> str:
+    if job.format != "auto":
+        return job.format
+    fmt = FORMATS.get(job.path.suffix.lower())
+    if fmt is None:
+        raise InputError(f"unknown model format '{job.path.suffix}' (expected .obj, .gltf or .glb; "
+                         f"or set input.format)", path=job.path)
+    return fmt
+
+
+def stage(_: Scene, job: ImportJob) -> tuple[Scene, StageRecord]:
+    """The import stage: read ``job.path`` into a new scene."""
+    if not job.path.exists():
+        raise InputError("file not found", path=job.path)
+    if job.path.is_dir():
+        raise InputError("is a folder, expected a model file", path=job.path)
+    fmt = detect_format(job)
+    if fmt == "obj":
+        from .obj import load
+    else:
+        from .gltf import load
+    return load(job)

@@ -1,0 +1,143 @@
+"""Plans which stages a config and scene call for, runs them, and records time and accuracy.
+
+A stage is a function ``(scene, section) -> (new scene, StageRecord)``. Stages do not import
+each other; this module is the only place that knows their order. Optional stages are switched
+by ``<section>.enabled``; the report says for every stage whether it ran and, if not, why.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from . import config as config_mod
+from .config import Config, ImportJob
+from .errors import BakeError, StageError
+from .record import StageRecord
+from .scene import Scene
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    name: str
+    target: str  # "module:function"
+    section: Callable[[Config], Any]
+    enabled: Callable[[Config], bool]
+    switch: str | None  # the key that turns it on/off, for the report
+
+    def load(self) -> Callable[[Scene, Any], tuple[Scene, StageRecord]]:
+        mod_name, fn = self.target.split(":")
+        return getattr(importlib.import_module(mod_name), fn)
+
+
+def _import_job(cfg: Config) -> ImportJob:
+    p = Path(cfg.input.path)
+    if not p.is_absolute():
+        p = cfg.base_dir / p
+    return ImportJob(path=p, format=cfg.input.format, strict=cfg.import_.strict,
+                     scene=cfg.import_.scene)
+
+
+def _always(_: Config) -> bool:
+    return True
+
+
+STAGES: tuple[StageSpec, ...] = (
+    StageSpec("import", "bake.importers:stage", _import_job, _always, None),
+    StageSpec("transform", "bake.mesh.transform:stage", lambda c: c.transform, _always, None),
+    StageSpec("triangulate", "bake.mesh.triangulate:stage", lambda c: c.mesh.triangulate, _always, None),
+    StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean,
+              lambda c: c.mesh.clean.enabled, "mesh.clean.enabled"),
+    StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify,
+              lambda c: c.mesh.simplify.enabled, "mesh.simplify.enabled"),
+    StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting,
+              lambda c: c.lighting.enabled, "lighting.enabled"),
+    StageSpec("bsp", "bake.bsp.stage:stage", lambda c: c.bsp, lambda c: c.bsp.enabled, "bsp.enabled"),
+    StageSpec("bvh", "bake.bvh.stage:stage", lambda c: c.bvh, lambda c: c.bvh.enabled, "bvh.enabled"),
+    StageSpec("export", "bake.export.lists:stage", lambda c: c.export,
+              lambda c: c.export.enabled, "export.enabled"),
+)
+
+
+def stage_names() -> list[str]:
+    return [s.name for s in STAGES]
+
+
+def plan(cfg: Config) -> list[tuple[StageSpec, bool, str]]:
+    """Each stage with whether it runs and why (or why not)."""
+    out = []
+    for spec in STAGES:
+        on = spec.enabled(cfg)
+        if spec.switch is None:
+            reason = "always runs"
+        else:
+            reason = f"{spec.switch} = {'true' if on else 'false'}"
+        out.append((spec, on, reason))
+    return out
+
+
+@dataclass
+class BakeResult:
+    scene: Scene
+    records: list[StageRecord]
+    skipped: list[dict[str, Any]]
+    seconds: float
+    config: Config
+
+
+Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done")
+
+
+def run(cfg: Config, *, progress: Progress | None = None, until: str | None = None,
+        scene: Scene | None = None) -> BakeResult:
+    """Run every stage the config calls for. ``until`` stops after the named stage."""
+    t0 = time.perf_counter()
+    records: list[StageRecord] = []
+    skipped: list[dict[str, Any]] = []
+    scene = scene if scene is not None else Scene()
+    for spec, on, reason in plan(cfg):
+        if not on:
+            skipped.append({"name": spec.name, "ran": False, "reason": reason})
+            continue
+        fn = spec.load()
+        if progress:
+            progress(spec.name, "start")
+        counts_in = counts(scene)
+        t = time.perf_counter()
+        try:
+            scene, rec = fn(scene, spec.section(cfg))
+        except BakeError:
+            raise
+        except MemoryError:
+            raise StageError(f"stage '{spec.name}' ran out of memory") from None
+        rec.seconds = rec.seconds or (time.perf_counter() - t)
+        if not rec.counts_in:
+            rec.counts_in = counts_in
+        if not rec.counts_out:
+            rec.counts_out = counts(scene)
+        records.append(rec)
+        if progress:
+            progress(spec.name, "done")
+        if until == spec.name:
+            break
+    return BakeResult(scene=scene, records=records, skipped=skipped,
+                      seconds=time.perf_counter() - t0, config=cfg)
+
+
+def counts(scene: Scene) -> dict[str, int]:
+    return {"polygons": scene.n_polygons, "triangles": scene.n_triangles,
+            "vertices": scene.n_vertices, "materials": len(scene.materials)}
+
+
+def load_config_for(target: str | Path, overrides: list[str] | None = None) -> Config:
+    """``bake run MODEL`` or ``bake run CONFIG.toml``: a config either way."""
+    p = Path(target)
+    if p.suffix.lower() == ".toml":
+        return config_mod.load(p, overrides)
+    cfg = config_mod.load(None, overrides)
+    cfg.input.path = str(p.resolve())
+    cfg.base_dir = Path.cwd()
+    return cfg

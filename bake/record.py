@@ -1,0 +1,52 @@
+"""The record a stage returns next to its new scene; the report is built from these."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass
+class StageRecord:
+    """What one stage did: time, counts in and out, accuracy figures, warnings.
+
+    ``counts_in`` / ``counts_out`` map names (``triangles``, ``vertices``, ...) to ints.
+    ``accuracy`` maps figure names to numbers (e.g. ``hausdorff_max``: fraction of the diagonal).
+    ``effects`` lists effects this stage ran or skipped: dicts with ``name``, ``ran`` (bool),
+    ``reason`` and optional ``rays``/``seconds``/``error``.
+    ``details`` holds anything else worth keeping in report.json (JSON-serialisable).
+    """
+
+    name: str
+    seconds: float = 0.0
+    counts_in: dict[str, int] = field(default_factory=dict)
+    counts_out: dict[str, int] = field(default_factory=dict)
+    accuracy: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    effects: list[dict[str, Any]] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def warn(self, message: str) -> None:
+        self.warnings.append(message)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "seconds": round(float(self.seconds), 6),
+            "counts_in": dict(self.counts_in),
+            "counts_out": dict(self.counts_out),
+            "accuracy": {k: _num(v) for k, v in self.accuracy.items()},
+            "warnings": list(self.warnings),
+            "effects": list(self.effects),
+            "details": self.details,
+        }
+
+
+def _num(v: Any) -> Any:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return v
+    if f != f or f in (float("inf"), float("-inf")):
+        return None
+    return f

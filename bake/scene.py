@@ -1,0 +1,248 @@
+"""The one data model every stage reads and writes.
+
+A :class:`Scene` is immutable by convention: a stage builds a new one with
+:meth:`Scene.replace` (or :func:`dataclasses.replace`) and never edits arrays in place.
+
+Geometry is world space, float64. Faces exist in two forms:
+
+* ``polygons``: what the importer read (n-gons kept), as vertex counts plus a flat index
+  array, with per-corner UVs aligned to the flat index array;
+* ``triangles``: what triangulation produced, ``(T, 3)`` vertex indices with per-triangle
+  material, per-corner UVs ``(T, 3, 2)`` and the polygon each triangle came from.
+
+Stages after triangulation work on ``triangles``. A stage that rebuilds triangles (simplify,
+BSP splitting) sets ``tri_polygon`` to ``-1`` for triangles that no longer correspond to a
+whole source polygon; export uses that to decide which quads / n-gons it can still write.
+
+Colours are floats in [0, 1], RGBA, sRGB-encoded (the values Scratch shows), never NaN.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Material:
+    name: str
+    color: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)
+    texture: Path | None = None  # base colour image (absolute path), if any
+    double_sided: bool = False
+
+    def with_(self, **kw: Any) -> "Material":
+        return dataclasses.replace(self, **kw)
+
+
+DEFAULT_MATERIAL = Material(name="default")
+
+
+@dataclass(frozen=True)
+class Light:
+    """A light source. ``kind`` is one of ``sun``, ``point``, ``spot``.
+
+    ``direction`` points *from* the light *towards* the scene (sun, spot).
+    ``angle`` is the sun's angular diameter in degrees (soft shadows); ``radius`` the size of a
+    point or spot light. ``intensity`` scales ``color`` (linear).
+    """
+
+    kind: str
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+    position: tuple[float, float, float] | None = None
+    direction: tuple[float, float, float] | None = None
+    angle: float = 0.0
+    radius: float = 0.0
+    range: float | None = None
+    inner_cone: float = 0.0  # radians (glTF convention)
+    outer_cone: float = 0.7853981633974483
+    name: str = ""
+    source: str = "config"  # "config" or the file it was imported from
+
+
+@dataclass(frozen=True)
+class ScratchList:
+    """A list destined for Scratch: numbers (or strings) plus how to read them.
+
+    ``values`` is a 1-D numpy array of numbers or a tuple of strings. ``stride`` is the number of
+    items per record; ``precision`` the number of significant decimals to write for floats
+    (``None`` = integers or exact). ``doc`` is one line for the report and docs.
+    """
+
+    name: str
+    values: Any
+    stride: int = 1
+    doc: str = ""
+    kind: str = "number"  # "number" | "int" | "string"
+    decimals: int | None = None  # decimals after the point for floats (None: shortest repr)
+
+
+@dataclass(frozen=True)
+class SourceInfo:
+    path: Path | None = None
+    files_read: tuple[Path, ...] = ()  # every file an importer opened (for --depfile)
+    format: str = ""
+
+
+@dataclass(frozen=True)
+class Scene:
+    positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    # polygons as read
+    poly_sizes: np.ndarray | None = None  # (P,) int64
+    poly_indices: np.ndarray | None = None  # (sum sizes,) int64
+    poly_material: np.ndarray | None = None  # (P,) int64
+    poly_uvs: np.ndarray | None = None  # (sum sizes, 2) float64, per corner
+    # triangles
+    triangles: np.ndarray | None = None  # (T, 3) int64
+    tri_material: np.ndarray | None = None  # (T,) int64
+    tri_uvs: np.ndarray | None = None  # (T, 3, 2) float64, per corner
+    tri_polygon: np.ndarray | None = None  # (T,) int64 source polygon or -1
+    # colours
+    vertex_colors: np.ndarray | None = None  # (V, 4) float64 in [0, 1]
+    face_colors: np.ndarray | None = None  # (T, 4) float64 in [0, 1], per triangle
+    # the rest
+    materials: tuple[Material, ...] = (DEFAULT_MATERIAL,)
+    lights: tuple[Light, ...] = ()
+    lists: Mapping[str, ScratchList] = field(default_factory=dict)
+    artefacts: Mapping[str, Any] = field(default_factory=dict)
+    source: SourceInfo = field(default_factory=SourceInfo)
+
+    # ------------------------------------------------------------------ helpers
+    def replace(self, **changes: Any) -> "Scene":
+        return dataclasses.replace(self, **changes)
+
+    def with_list(self, lst: ScratchList) -> "Scene":
+        lists = dict(self.lists)
+        lists[lst.name] = lst
+        return self.replace(lists=lists)
+
+    def with_artefact(self, name: str, value: Any) -> "Scene":
+        art = dict(self.artefacts)
+        art[name] = value
+        return self.replace(artefacts=art)
+
+    @property
+    def n_vertices(self) -> int:
+        return int(len(self.positions))
+
+    @property
+    def n_polygons(self) -> int:
+        return 0 if self.poly_sizes is None else int(len(self.poly_sizes))
+
+    @property
+    def n_triangles(self) -> int:
+        return 0 if self.triangles is None else int(len(self.triangles))
+
+    @property
+    def poly_offsets(self) -> np.ndarray:
+        """Start of each polygon in ``poly_indices`` (length P + 1)."""
+        sizes = self.poly_sizes if self.poly_sizes is not None else np.zeros(0, np.int64)
+        off = np.zeros(len(sizes) + 1, dtype=np.int64)
+        np.cumsum(sizes, out=off[1:])
+        return off
+
+    def bounds(self) -> np.ndarray:
+        """(2, 3) min/max of the vertices that faces use (all vertices if no faces)."""
+        if self.n_vertices == 0:
+            return np.zeros((2, 3))
+        used = self.used_vertex_mask()
+        p = self.positions[used] if used.any() else self.positions
+        return np.stack([p.min(axis=0), p.max(axis=0)])
+
+    def diagonal(self) -> float:
+        b = self.bounds()
+        return float(np.linalg.norm(b[1] - b[0]))
+
+    def scale(self) -> float:
+        """A length for scene-relative tolerances: the bbox diagonal, or the largest
+        coordinate magnitude for a flat/degenerate scene, never 0."""
+        d = self.diagonal()
+        if d > 0 and np.isfinite(d):
+            return d
+        m = float(np.abs(self.positions).max()) if self.n_vertices else 0.0
+        return m if m > 0 else 1.0
+
+    def used_vertex_mask(self) -> np.ndarray:
+        used = np.zeros(self.n_vertices, dtype=bool)
+        if self.triangles is not None and len(self.triangles):
+            used[self.triangles.ravel()] = True
+        elif self.poly_indices is not None and len(self.poly_indices):
+            used[self.poly_indices] = True
+        return used
+
+    def triangle_vertices(self) -> np.ndarray:
+        """(T, 3, 3) float64 corner positions."""
+        if self.triangles is None:
+            return np.zeros((0, 3, 3))
+        return self.positions[self.triangles]
+
+    def triangle_albedo(self) -> np.ndarray:
+        """(T, 4) base colour per triangle: material colour times the mean vertex colour."""
+        T = self.n_triangles
+        if T == 0:
+            return np.zeros((0, 4))
+        mat = np.array([m.color for m in self.materials], dtype=np.float64)
+        col = mat[np.clip(self.tri_material, 0, len(mat) - 1)]
+        if self.vertex_colors is not None:
+            col = col * self.vertex_colors[self.triangles].mean(axis=1)
+        return col
+
+    def validate(self) -> None:
+        """Internal consistency check used by tests and the pipeline (raises AssertionError)."""
+        V = self.n_vertices
+        assert self.positions.dtype == np.float64 and self.positions.shape == (V, 3)
+        if self.poly_sizes is not None:
+            assert self.poly_indices is not None and self.poly_material is not None
+            assert int(self.poly_sizes.sum()) == len(self.poly_indices)
+            assert len(self.poly_material) == len(self.poly_sizes)
+            if len(self.poly_indices):
+                assert self.poly_indices.min() >= 0 and self.poly_indices.max() < V
+            if self.poly_uvs is not None:
+                assert self.poly_uvs.shape == (len(self.poly_indices), 2)
+        if self.triangles is not None:
+            T = len(self.triangles)
+            assert self.triangles.shape == (T, 3)
+            assert self.tri_material is not None and len(self.tri_material) == T
+            if T:
+                assert self.triangles.min() >= 0 and self.triangles.max() < V
+                assert self.tri_material.min() >= 0 and self.tri_material.max() < len(self.materials)
+            if self.tri_uvs is not None:
+                assert self.tri_uvs.shape == (T, 3, 2)
+            if self.tri_polygon is not None:
+                assert len(self.tri_polygon) == T
+            if self.face_colors is not None:
+                assert self.face_colors.shape == (T, 4)
+        if self.vertex_colors is not None:
+            assert self.vertex_colors.shape == (V, 4)
+        for name in ("positions", "vertex_colors", "face_colors", "poly_uvs", "tri_uvs"):
+            a = getattr(self, name)
+            if a is not None:
+                assert np.isfinite(a).all(), f"{name} has NaN/Inf"
+
+
+def make_scene(positions: Any, triangles: Any = None, *, polygons: list[list[int]] | None = None,
+               materials: tuple[Material, ...] | None = None, tri_material: Any = None,
+               vertex_colors: Any = None, tri_uvs: Any = None) -> Scene:
+    """Build a scene from plain arrays (tests, generated meshes). Either ``triangles`` (T, 3)
+    or ``polygons`` (a list of index lists) is given; triangles also fill the polygon arrays."""
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    mats = tuple(materials) if materials else (DEFAULT_MATERIAL,)
+    if polygons is not None:
+        sizes = np.array([len(p) for p in polygons], dtype=np.int64)
+        idx = np.array([i for p in polygons for i in p], dtype=np.int64)
+        pm = np.zeros(len(sizes), np.int64) if tri_material is None else np.asarray(tri_material, np.int64)
+        return Scene(positions=pos, poly_sizes=sizes, poly_indices=idx, poly_material=pm, materials=mats,
+                     vertex_colors=None if vertex_colors is None else np.asarray(vertex_colors, np.float64))
+    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    T = len(tris)
+    tm = np.zeros(T, np.int64) if tri_material is None else np.asarray(tri_material, np.int64)
+    vc = None if vertex_colors is None else np.asarray(vertex_colors, np.float64)
+    uv = None if tri_uvs is None else np.asarray(tri_uvs, np.float64).reshape(T, 3, 2)
+    return Scene(positions=pos, poly_sizes=np.full(T, 3, np.int64), poly_indices=tris.ravel().copy(),
+                 poly_material=tm.copy(), poly_uvs=None if uv is None else uv.reshape(-1, 2).copy(),
+                 triangles=tris, tri_material=tm, tri_uvs=uv, tri_polygon=np.arange(T, dtype=np.int64),
+                 vertex_colors=vc, materials=mats)

@@ -1,0 +1,26 @@
+"""Shared fixtures. Tests that need the shared corpus skip with a reason when it is absent."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
+
+
+def corpus_path(*parts: str) -> Path:
+    """Path inside ../shared/corpus, or skip the calling test if the corpus is absent."""
+    p = CORPUS.joinpath(*parts)
+    if not CORPUS.is_dir():
+        pytest.skip(f"../shared/corpus not found at {CORPUS} (set BAKE_CORPUS to run corpus tests)")
+    if not p.exists():
+        pytest.skip(f"corpus file missing: {p}")
+    return p
+
+
+@pytest.fixture
+def corpus():
+    return corpus_path

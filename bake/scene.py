@@ -15,6 +15,8 @@ BSP splitting) sets ``tri_polygon`` to ``-1`` for triangles that no longer corre
 whole source polygon; export uses that to decide which quads / n-gons it can still write.
 
 Colours are floats in [0, 1], RGBA, sRGB-encoded (the values Scratch shows), never NaN.
+UVs use the OBJ/OpenGL convention: (0, 0) is the bottom-left of the image, v grows upward
+(the glTF importer converts from glTF's top-left origin).
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ class Material:
     name: str
     color: tuple[float, float, float, float] = (0.8, 0.8, 0.8, 1.0)
     texture: Path | None = None  # base colour image (absolute path), if any
+    # Encoded image bytes (PNG/JPEG) for textures embedded in the model (GLB, data: URIs).
+    texture_data: bytes | None = field(default=None, repr=False)
     double_sided: bool = False
 
     def with_(self, **kw: Any) -> "Material":

@@ -1,0 +1,231 @@
+"""The ``bake`` command.
+
+    bake run MODEL|CONFIG.toml [--set key=value ...] [--out DIR] [--depfile FILE] [--strict] [--quiet]
+    bake demo [--out DIR]
+    bake inspect MODEL [--set key=value ...] [--json]
+    bake keys
+
+Exit statuses: see bake/errors.py (0 ok, 1 internal error, 2 config/usage, 3 bad input,
+4 limit exceeded under --strict, 5 stage failure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import traceback
+from pathlib import Path
+from typing import Any, Callable
+
+from . import __version__
+from . import config as config_mod
+from .errors import BakeError, InputError, LimitError
+
+
+# --------------------------------------------------------------------------- progress
+class _Progress:
+    """Stage progress on stderr: a rich status line on a terminal, nothing otherwise."""
+
+    def __init__(self, quiet: bool):
+        self.enabled = not quiet and sys.stderr.isatty()
+        self._status = None
+        if self.enabled:
+            from rich.console import Console
+            self._console = Console(stderr=True)
+
+    def __call__(self, stage: str, event: str) -> None:
+        if not self.enabled:
+            return
+        if event == "start":
+            if self._status is None:
+                self._status = self._console.status(f"bake: {stage} ...")
+                self._status.start()
+            else:
+                self._status.update(f"bake: {stage} ...")
+
+    def stop(self) -> None:
+        if self._status is not None:
+            self._status.stop()
+            self._status = None
+
+
+def _default_out(target: Path) -> Path:
+    return Path("bake-out") / target.stem
+
+
+def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfile: Path | None) -> dict[str, Any]:
+    from . import pipeline
+    from .export import output, report
+
+    prog = _Progress(quiet)
+    try:
+        result = pipeline.run(cfg, progress=prog)
+    finally:
+        prog.stop()
+    rep = output.finish(result, out, depfile=depfile)
+    if not quiet:
+        for line in report.summary_lines(rep):
+            print(line)
+        print(f"  wrote {out}/ (report.md, report.json, lists)")
+    if strict or cfg.report.strict:
+        bad = [lim for lim in rep["limits"] if not lim["ok"]]
+        if bad:
+            raise LimitError(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
+                             f"{bad[0]['limit']}; see {out / 'report.md'}")
+    return rep
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .pipeline import load_config_for
+
+    target = Path(args.target)
+    if not target.exists():
+        raise InputError("file not found", path=target)
+    cfg = load_config_for(target, args.set)
+    out = Path(args.out) if args.out else _default_out(target)
+    _bake(cfg, out, quiet=args.quiet, strict=args.strict, depfile=Path(args.depfile) if args.depfile else None)
+    return 0
+
+
+def sample_config_path() -> Path:
+    return Path(__file__).resolve().parent / "samples" / "demo.toml"
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    cfg = config_mod.load(sample_config_path(), args.set)
+    _bake(cfg, Path(args.out), quiet=args.quiet, strict=False, depfile=None)
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from . import pipeline
+    from .export import lists as export_lists
+
+    cfg = pipeline.load_config_for(Path(args.target), args.set)
+    result = pipeline.run(cfg, until="clean")
+    scene = result.scene
+    sizes: dict[str, int] = {}
+    if scene.poly_sizes is not None and len(scene.poly_sizes):
+        u, c = np.unique(scene.poly_sizes, return_counts=True)
+        sizes = {str(int(k)): int(v) for k, v in zip(u, c)}
+    b = scene.bounds()
+    exported, _ = export_lists.stage(scene, cfg.export)
+    info = exported.artefacts["list_info"]
+    data = {
+        "file": str(scene.source.path),
+        "format": scene.source.format,
+        "polygons_by_size": sizes,
+        "triangles": scene.n_triangles,
+        "vertices": scene.n_vertices,
+        "materials": [{"name": m.name, "color": [round(c, 4) for c in m.color],
+                       "texture": str(m.texture) if m.texture else ("embedded" if m.texture_data else None)}
+                      for m in scene.materials],
+        "lights": len(scene.lights),
+        "bounds": {"min": b[0].tolist(), "max": b[1].tolist(), "diagonal": scene.diagonal()},
+        "lists": {k: {"items": v["items"], "project_json_bytes": v["project_json_bytes"]} for k, v in info.items()},
+        "warnings": [w for r in result.records for w in r.warnings],
+    }
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    print(f"{data['file']} ({data['format']})")
+    print("  polygons by size: " + (", ".join(f"{k}-gon x{v}" for k, v in sizes.items()) or "none"))
+    print(f"  triangles {data['triangles']}, vertices {data['vertices']}, lights {data['lights']}")
+    print(f"  bounds min {np.round(b[0], 4).tolist()} max {np.round(b[1], 4).tolist()}, "
+          f"diagonal {data['bounds']['diagonal']:.6g}")
+    print(f"  materials ({len(data['materials'])}):")
+    for m in data["materials"]:
+        tex = f", texture {m['texture']}" if m["texture"] else ""
+        print(f"    {m['name']}: rgba {m['color']}{tex}")
+    print("  lists (with the current export settings):")
+    for k, v in data["lists"].items():
+        print(f"    {k:<14} {v['items']:>8} items  {v['project_json_bytes']:>9} bytes")
+    for w in data["warnings"]:
+        print(f"  warning: {w}")
+    return 0
+
+
+def cmd_keys(args: argparse.Namespace) -> int:
+    cfg = config_mod.Config()
+    for key in config_mod.all_keys():
+        try:
+            val = config_mod.get_key(cfg, key)
+        except BakeError:
+            val = "?"
+        print(f"{key} = {json.dumps(val) if not isinstance(val, list) else json.dumps(config_mod.to_dict(val))}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bake", description="Bake 3D models into Scratch-ready lists.")
+    p.add_argument("--version", action="version", version=f"scratch-bake {__version__}")
+    p.add_argument("--debug", action="store_true", help="show Python tracebacks")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def common(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a config key (repeatable), e.g. --set bsp.enabled=true")
+        sp.add_argument("--quiet", action="store_true", help="print nothing but errors")
+        sp.add_argument("--debug", action="store_true", help="show Python tracebacks")
+
+    r = sub.add_parser("run", help="bake a model file or a config")
+    r.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")
+    r.add_argument("--out", help="output folder (default: bake-out/<name>)")
+    r.add_argument("--depfile", help="write Make-style dependencies to this file")
+    r.add_argument("--strict", action="store_true", help="exit 4 if a Scratch limit is exceeded")
+    common(r)
+    r.set_defaults(func=cmd_run)
+
+    d = sub.add_parser("demo", help="bake the bundled sample into ./bake-demo/")
+    d.add_argument("--out", default="bake-demo")
+    common(d)
+    d.set_defaults(func=cmd_demo)
+
+    i = sub.add_parser("inspect", help="print counts, materials, bounds and list sizes of a model")
+    i.add_argument("target")
+    i.add_argument("--json", action="store_true")
+    common(i)
+    i.set_defaults(func=cmd_inspect)
+
+    k = sub.add_parser("keys", help="list every config key with its default")
+    k.set_defaults(func=cmd_keys, set=[], quiet=False)
+
+    for extra in _EXTRA_COMMANDS:
+        extra(sub, common)
+    return p
+
+
+# Commands contributed by other modules: functions (subparsers, common) -> None.
+_EXTRA_COMMANDS: list[Callable[[Any, Callable], None]] = []
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    debug = getattr(args, "debug", False)
+    try:
+        return int(args.func(args) or 0)
+    except BakeError as e:
+        if debug:
+            traceback.print_exc()
+        print(f"bake: error: {e}", file=sys.stderr)
+        return e.exit_code
+    except BrokenPipeError:  # e.g. `bake keys | head`
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print("bake: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a bug: one line, traceback with --debug
+        if debug:
+            traceback.print_exc()
+        print(f"bake: internal error: {type(e).__name__}: {e} (rerun with --debug for the traceback)",
+              file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

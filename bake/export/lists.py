@@ -1,0 +1,204 @@
+"""The export stage: the scene as Scratch lists (list files and one JSON file).
+
+Mesh lists follow the book's "Mesh data in Scratch" tables (see docs/formats.md):
+
+=============  ======  ===============================================================
+list           stride  items
+=============  ======  ===============================================================
+verts          3       x, y, z of each vertex
+tris           4       v1, v2, v3 (1-based into verts), material (1-based into mat colors)
+mat colors     1       Scratch colour number of each material
+tri colors     1       colour number of each triangle (baked light, or material colour)
+vert colors    1       colour number of each vertex
+tri uvs        6       u1, v1, u2, v2, u3, v3 of each triangle (v up, 0..1 over the image)
+quads          5       v1..v4, material (with ``export.faces = "quads"``)
+ngons          n + 2   n, material, v1..vn, repeated (with ``export.faces = "ngons"``)
+=============  ======  ===============================================================
+
+Lists that other stages added to ``scene.lists`` (BSP, BVH, ...) follow the mesh lists.
+The stage writes nothing to disk: it returns the file contents in the artefact ``outputs``
+(relative path -> bytes), which the writer puts in place atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+
+import numpy as np
+
+from ..config import ExportConfig
+from ..errors import ConfigError
+from ..record import StageRecord
+from ..scene import ScratchList, Scene
+from ..textures.colors import scratch_numbers
+from .numbers import decimals_for, format_numbers, json_array
+
+# A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
+# characters in projects saved by Scratch; the rest is punctuation.
+LIST_ENTRY_OVERHEAD = 20 + 2 + 1 + 2 + 1 + 1 + 1
+
+
+def list_file_name(name: str) -> str:
+    """A safe file name for a list (Scratch ignores the file name on import)."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "list"
+    return f"lists/{safe}.txt"
+
+
+def render_items(lst: ScratchList) -> list[str]:
+    if lst.kind == "string":
+        return [str(v) for v in lst.values]
+    return format_numbers(np.asarray(lst.values), lst.decimals, name=lst.name)
+
+
+def project_json_bytes(name: str, items_json: str) -> int:
+    """Bytes this list adds to a project.json (hidden monitor, so stored once)."""
+    return len(json.dumps(name, ensure_ascii=False).encode()) + len(items_json.encode()) + LIST_ENTRY_OVERHEAD
+
+
+def _colour_list(rgba: np.ndarray, mode: str):
+    vals = scratch_numbers(rgba, mode)
+    if mode == "hex":
+        return vals, "string"
+    return np.asarray(vals, dtype=np.int64), "int"
+
+
+def _whole_polygons(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Polygons of ``size`` vertices all of whose triangles survive, and a triangle mask of
+    the triangles they cover."""
+    T = scene.n_triangles
+    if scene.tri_polygon is None or scene.poly_sizes is None or T == 0:
+        return np.zeros(0, np.int64), np.zeros(T, bool)
+    tp = scene.tri_polygon
+    valid = tp >= 0
+    per_poly = np.bincount(tp[valid], minlength=scene.n_polygons)
+    sizes = scene.poly_sizes
+    whole = (per_poly == sizes - 2) & (sizes >= 3)
+    sel = whole & (sizes == size) if size > 0 else whole & (sizes > 4)
+    polys = np.flatnonzero(sel)
+    covered = np.zeros(T, bool)
+    covered[valid] = sel[tp[valid]]
+    return polys, covered
+
+
+def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
+    n = cfg.names
+    out: list[ScratchList] = []
+    diag = scene.scale()
+    dec = decimals_for(diag * 10.0 ** (-cfg.precision))
+    T = scene.n_triangles
+    tris = scene.triangles if scene.triangles is not None else np.zeros((0, 3), np.int64)
+    mats = scene.tri_material if scene.tri_material is not None else np.zeros(0, np.int64)
+
+    if cfg.vertices:
+        out.append(ScratchList(n.vertices, scene.positions.ravel(), 3, "x, y, z per vertex", "number", dec))
+
+    keep_mask = np.ones(T, bool)
+    poly_lists: list[ScratchList] = []
+    if cfg.faces != "triangles":
+        if "bsp" in scene.artefacts:
+            record.warn(f"export.faces = '{cfg.faces}' ignored: the BSP stage orders triangles, "
+                        "so every face is written to the triangle list")
+        else:
+            off = scene.poly_offsets
+            quads, covered4 = _whole_polygons(scene, 4)
+            keep_mask &= ~covered4
+            if len(quads):
+                idx = scene.poly_indices[off[quads][:, None] + np.arange(4)] + 1
+                q = np.concatenate([idx, scene.poly_material[quads][:, None] + 1], axis=1)
+                poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad", "int"))
+            else:
+                poly_lists.append(ScratchList(n.quads, np.zeros(0, np.int64), 5, "v1..v4, material per quad", "int"))
+            if cfg.faces == "ngons":
+                ngons, coveredn = _whole_polygons(scene, 0)
+                keep_mask &= ~coveredn
+                sizes = scene.poly_sizes[ngons]
+                # record layout: n, material, v1..vn
+                rec_len = sizes + 2
+                starts = np.zeros(len(ngons) + 1, np.int64)
+                np.cumsum(rec_len, out=starts[1:])
+                flat = np.zeros(int(starts[-1]), np.int64)
+                flat[starts[:-1]] = sizes
+                flat[starts[:-1] + 1] = scene.poly_material[ngons] + 1
+                if len(ngons):
+                    rep = np.repeat(np.arange(len(ngons)), sizes)
+                    within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+                    flat[starts[:-1][rep] + 2 + within] = scene.poly_indices[off[ngons][rep] + within] + 1
+                poly_lists.append(ScratchList(n.ngons, flat, 0, "n, material, v1..vn per polygon", "int"))
+            record.details["faces"] = {"quads": int(len(quads)),
+                                       "ngons": int(len(_whole_polygons(scene, 0)[0])) if cfg.faces == "ngons" else 0,
+                                       "triangles": int(keep_mask.sum())}
+
+    if cfg.triangles:
+        t = np.concatenate([tris[keep_mask] + 1, mats[keep_mask][:, None] + 1], axis=1)
+        out.append(ScratchList(n.triangles, t.ravel(), 4, "v1, v2, v3 (1-based), material (1-based)", "int"))
+    out.extend(poly_lists)
+
+    if cfg.materials:
+        mc = np.array([m.color for m in scene.materials], dtype=np.float64).reshape(-1, 4)
+        vals, kind = _colour_list(mc, cfg.color_format)
+        out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
+
+    want_tri = cfg.triangle_colors == "yes" or (cfg.triangle_colors == "auto" and scene.face_colors is not None)
+    if want_tri:
+        fc = scene.face_colors if scene.face_colors is not None else scene.triangle_albedo()
+        vals, kind = _colour_list(fc[keep_mask], cfg.color_format)
+        out.append(ScratchList(n.triangle_colors, vals, 1, "colour number per triangle", kind))
+
+    want_vc = cfg.vertex_colors == "yes" or (cfg.vertex_colors == "auto" and scene.vertex_colors is not None)
+    if want_vc:
+        vc = scene.vertex_colors if scene.vertex_colors is not None else np.ones((scene.n_vertices, 4))
+        vals, kind = _colour_list(vc, cfg.color_format)
+        out.append(ScratchList(n.vertex_colors, vals, 1, "colour number per vertex", kind))
+
+    textured = any(m.texture is not None or m.texture_data is not None for m in scene.materials)
+    want_uv = cfg.uvs == "yes" or (cfg.uvs == "auto" and textured and scene.tri_uvs is not None)
+    if want_uv:
+        uv = scene.tri_uvs if scene.tri_uvs is not None else np.zeros((T, 3, 2))
+        out.append(ScratchList(n.uvs, uv[keep_mask].ravel(), 6, "u1, v1, u2, v2, u3, v3 per triangle", "number", 4))
+    return out
+
+
+def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
+    t0 = time.perf_counter()
+    rec = StageRecord("export")
+    lists = mesh_lists(scene, cfg, rec)
+    names = {lst.name for lst in lists}
+    for lst in scene.lists.values():
+        if lst.name in names:
+            raise ConfigError(f"list name '{lst.name}' is used twice (a mesh list and a {lst.doc or 'stage'} list); "
+                              "rename one under [export.names]", key="export.names")
+        lists.append(lst)
+        names.add(lst.name)
+
+    files: dict[str, bytes] = {}
+    info: dict[str, dict] = {}
+    arrays: dict[str, str] = {}
+    used_files: dict[str, str] = {}
+    for lst in lists:
+        items = render_items(lst)
+        arr = json_array(items, "string" if lst.kind == "string" else "number")
+        arrays[lst.name] = arr
+        fname = list_file_name(lst.name)
+        if fname in used_files:
+            raise ConfigError(f"lists '{used_files[fname]}' and '{lst.name}' map to the same file {fname}",
+                              key="export.names")
+        used_files[fname] = lst.name
+        if cfg.txt:
+            files[fname] = "\n".join(items).encode("utf-8")  # no trailing newline (scratch.md 3)
+        info[lst.name] = {"items": len(items), "stride": lst.stride, "doc": lst.doc,
+                          "project_json_bytes": project_json_bytes(lst.name, arr),
+                          "file": fname if cfg.txt else None}
+    if cfg.json:
+        body = ",".join(f"{json.dumps(k, ensure_ascii=False)}:{v}" for k, v in arrays.items())
+        meta = json.dumps({k: {"stride": v["stride"], "doc": v["doc"]} for k, v in info.items()},
+                          ensure_ascii=False, separators=(",", ":"))
+        files[cfg.json_name] = ('{"format":"scratch-bake lists","version":1,"lists":{' + body +
+                                '},"info":' + meta + "}").encode("utf-8")
+
+    new = scene.replace(lists={lst.name: lst for lst in lists})
+    new = new.with_artefact("outputs", files).with_artefact("list_info", info)
+    rec.details["lists"] = info
+    rec.seconds = time.perf_counter() - t0
+    return new, rec

@@ -1,0 +1,62 @@
+"""Numbers as short as they can be, for Scratch lists and project.json.
+
+Floats are rounded to a number of decimals and written in the shortest text that reads back
+as the rounded value (Python's ``repr`` of the rounded double, which is what JSON and
+JavaScript's ``Number()`` agree on). Whole numbers lose their ``.0``; ``-0`` becomes ``0``.
+NaN and Infinity are refused: Scratch's parser rejects ``null`` items, which is what
+``JSON.stringify`` turns them into (shared/docs/scratch.md, section 1).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import StageError
+
+
+def decimals_for(step: float) -> int:
+    """Decimals needed to resolve ``step`` (e.g. 0.002 -> 3)."""
+    if not (step > 0) or not math.isfinite(step):
+        return 6
+    return max(0, int(math.ceil(-math.log10(step) - 1e-9)))
+
+
+def format_numbers(values: np.ndarray | list, decimals: int | None = None, *, name: str = "") -> list[str]:
+    """Format a 1-D array as short decimal strings.
+
+    ``decimals=None`` writes integers as integers and floats in their shortest round-trip
+    form. Raises StageError (naming the list) if any value is NaN or infinite.
+    """
+    a = np.asarray(values)
+    if a.ndim != 1:
+        a = a.ravel()
+    if a.size == 0:
+        return []
+    if a.dtype.kind in "iub":
+        return list(map(str, a.astype(np.int64).tolist()))
+    a = a.astype(np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise StageError(f"list '{name}' has a non-finite value at item {first + 1}; refusing to write "
+                         f"NaN/Infinity into a Scratch list")
+    if decimals is not None:
+        # np.round scales by 10**decimals; leave magnitudes where that would lose digits
+        a = np.where(np.abs(a) < 1e15, np.round(a, decimals), a)
+    a = a + 0.0  # turns -0.0 into 0.0
+    whole = (a == np.floor(a)) & (np.abs(a) < 2.0 ** 53)
+    out = np.empty(a.size, dtype=object)
+    out[:] = list(map(repr, a.tolist()))
+    if whole.any():
+        out[whole] = list(map(str, a[whole].astype(np.int64).tolist()))
+    return out.tolist()
+
+
+def json_array(items: list[str], kind: str = "number") -> str:
+    """A JSON array from preformatted items (numbers unquoted, strings quoted)."""
+    if kind == "string":
+        import json
+        return json.dumps(items, ensure_ascii=False, separators=(",", ":"))
+    return "[" + ",".join(items) + "]"

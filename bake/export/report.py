@@ -1,0 +1,136 @@
+"""The size/limit report: ``report.json`` for scripts, ``report.md`` and a terminal summary for people.
+
+``report.json`` shape (stable; documented in docs/report.md; ``report_version`` bumps on breaking changes):
+
+* ``report_version``, ``tool`` {name, version}
+* ``input`` {path, format, files_read}
+* ``scene`` {polygons, triangles, vertices, materials} after the last stage
+* ``stages``: list in run order of {name, seconds, counts_in, counts_out, accuracy, warnings, effects, details}
+* ``lists``: name -> {items, stride, bytes, file, doc}; ``bytes`` is what the list adds to project.json
+* ``limits``: list of {name, value, limit, ok, note}
+* ``effects``: list of {name, ran, reason, ...}: every stage and effect that ran or was skipped, and why
+* ``outputs``: relative path -> "written" | "unchanged" | "removed"
+* ``seconds``: wall time of the whole bake
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from ..config import to_dict
+from ..pipeline import BakeResult, counts
+
+REPORT_VERSION = 1
+LIST_ITEM_LIMIT = 200_000  # vanilla `add to list` stops here (loading is not limited)
+PROJECT_JSON_LIMIT = 5 * 1024 * 1024  # 5 MiB upload limit on scratch.mit.edu
+ASSET_LIMIT = 10_000_000  # each costume/sound must be under 10 MB
+# An empty project.json (stage, one sprite, backdrop and costume entries, meta) is about this size.
+PROJECT_BASE_BYTES = 1_500
+
+
+def build(result: BakeResult, outputs: dict[str, str] | None = None,
+          assets: dict[str, int] | None = None) -> dict[str, Any]:
+    scene = result.scene
+    info = scene.artefacts.get("list_info", {})
+    lists = {name: {"items": v["items"], "stride": v["stride"], "bytes": v["project_json_bytes"],
+                    "file": v.get("file"), "doc": v.get("doc", "")} for name, v in info.items()}
+    limits = []
+    for name, v in lists.items():
+        limits.append({"name": f"list '{name}' items", "value": v["items"], "limit": LIST_ITEM_LIMIT,
+                       "ok": v["items"] <= LIST_ITEM_LIMIT,
+                       "note": "vanilla `add to list` stops at 200,000 items; loading a longer list works"})
+    pj = PROJECT_BASE_BYTES + sum(v["bytes"] for v in lists.values())
+    limits.append({"name": "project.json bytes (estimated)", "value": pj, "limit": PROJECT_JSON_LIMIT,
+                   "ok": pj <= PROJECT_JSON_LIMIT, "note": "upload limit on scratch.mit.edu"})
+    for name, size in (assets or {}).items():
+        limits.append({"name": f"asset {name} bytes", "value": size, "limit": ASSET_LIMIT,
+                       "ok": size < ASSET_LIMIT, "note": "each asset must be under 10 MB"})
+    effects: list[dict[str, Any]] = []
+    for rec in result.records:
+        effects.append({"name": rec.name, "ran": True, "reason": "stage ran", "seconds": round(rec.seconds, 6)})
+        for e in rec.effects:
+            effects.append({**e, "name": f"{rec.name}.{e.get('name', '?')}"})
+    effects.extend(result.skipped)
+    src = scene.source
+    return {
+        "report_version": REPORT_VERSION,
+        "tool": {"name": "scratch-bake", "version": __version__},
+        "input": {"path": str(src.path) if src.path else None, "format": src.format,
+                  "files_read": [str(p) for p in src.files_read]},
+        "scene": counts(scene),
+        "stages": [r.to_json() for r in result.records],
+        "lists": lists,
+        "limits": limits,
+        "effects": effects,
+        "outputs": dict(sorted((outputs or {}).items())),
+        "seconds": round(result.seconds, 6),
+        "config": to_dict(result.config),
+    }
+
+
+def to_json(report: dict[str, Any]) -> bytes:
+    return (json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False) + "\n").encode("utf-8")
+
+
+def _fmt_bytes(n: int) -> str:
+    if n >= 1024 * 1024:
+        return f"{n / 1024 / 1024:.2f} MiB"
+    if n >= 1024:
+        return f"{n / 1024:.1f} KiB"
+    return f"{n} B"
+
+
+def _limit_pct(lim: dict) -> str:
+    return f"{100.0 * lim['value'] / lim['limit']:.1f}%"
+
+
+def to_markdown(report: dict[str, Any]) -> str:
+    s = report["scene"]
+    out = [f"# Bake report: {Path(report['input']['path'] or '').name}", "",
+           f"scratch-bake {report['tool']['version']} · {report['seconds']:.2f} s · "
+           f"{s['triangles']} triangles, {s['vertices']} vertices, {s['materials']} materials", "",
+           "## Stages", "", "| stage | seconds | in | out | accuracy | warnings |", "|---|---:|---|---|---|---|"]
+    for st in report["stages"]:
+        cin = ", ".join(f"{k} {v}" for k, v in st["counts_in"].items() if k in ("triangles", "vertices"))
+        cout = ", ".join(f"{k} {v}" for k, v in st["counts_out"].items() if k in ("triangles", "vertices"))
+        acc = ", ".join(f"{k} {v:.4g}" if isinstance(v, (int, float)) else f"{k} {v}"
+                        for k, v in st["accuracy"].items())
+        warn = "<br>".join(w.replace("|", "\\|") for w in st["warnings"])
+        out.append(f"| {st['name']} | {st['seconds']:.3f} | {cin} | {cout} | {acc} | {warn} |")
+    out += ["", "## Effects", "", "| effect | ran | reason |", "|---|---|---|"]
+    for e in report["effects"]:
+        extra = f" ({e['rays']} rays)" if e.get("rays") else ""
+        out.append(f"| {e['name']} | {'yes' if e['ran'] else 'no'} | {e.get('reason', '')}{extra} |")
+    out += ["", "## Lists", "", "| list | items | stride | project.json bytes | file |", "|---|---:|---:|---:|---|"]
+    for name, v in report["lists"].items():
+        out.append(f"| {name} | {v['items']} | {v['stride'] or 'var'} | {v['bytes']} | {v['file'] or ''} |")
+    out += ["", "## Limits", "", "| check | value | limit | used | ok |", "|---|---:|---:|---:|---|"]
+    for lim in report["limits"]:
+        out.append(f"| {lim['name']} | {lim['value']} | {lim['limit']} | {_limit_pct(lim)} | "
+                   f"{'ok' if lim['ok'] else '**EXCEEDED**'} |")
+    return "\n".join(out) + "\n"
+
+
+def summary_lines(report: dict[str, Any]) -> list[str]:
+    """A short human summary (gltfpack-style) for the terminal."""
+    s = report["scene"]
+    lines = [f"{Path(report['input']['path'] or '').name}: {s['triangles']} triangles, {s['vertices']} vertices, "
+             f"{s['materials']} materials in {report['seconds']:.2f} s"]
+    for st in report["stages"]:
+        acc = " ".join(f"{k}={v:.3g}" for k, v in st["accuracy"].items() if isinstance(v, (int, float)))
+        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}")
+        for w in st["warnings"]:
+            lines.append(f"    warning: {w}")
+    total = sum(v["bytes"] for v in report["lists"].values())
+    lines.append(f"  lists: {len(report['lists'])}, {sum(v['items'] for v in report['lists'].values())} items, "
+                 f"{_fmt_bytes(total)} in project.json")
+    for lim in report["limits"]:
+        if not lim["ok"]:
+            lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']} > {lim['limit']}")
+    pj = [lim for lim in report["limits"] if lim["name"].startswith("project.json")]
+    if pj:
+        lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])})")
+    return lines

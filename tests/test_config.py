@@ -1,0 +1,99 @@
+"""Config loading: types, unknown keys with suggestions and line numbers, overrides."""
+
+import pytest
+
+from bake import config
+from bake.errors import ConfigError
+
+
+def write(tmp_path, text):
+    p = tmp_path / "bake.toml"
+    p.write_text(text)
+    return p
+
+
+def test_defaults_run_only_the_always_on_stages():
+    from bake.pipeline import plan
+    cfg = config.load()
+    ran = [spec.name for spec, on, _ in plan(cfg) if on]
+    assert ran == ["import", "transform", "triangulate", "clean", "export"]
+
+
+def test_unknown_key_names_file_line_and_suggestion(tmp_path):
+    p = write(tmp_path, '[input]\npath = "m.obj"\n\n[bsp]\nenabled = true\ncandidtes = 32\n')
+    with pytest.raises(ConfigError) as e:
+        config.load(p)
+    msg = str(e.value)
+    assert f"{p}:6" in msg and "bsp.candidtes" in msg and "did you mean 'bsp.candidates'" in msg
+    assert e.value.exit_code == 2
+
+
+def test_unknown_section_suggests(tmp_path):
+    p = write(tmp_path, "[lightning]\nenabled = true\n")
+    with pytest.raises(ConfigError, match="did you mean 'lighting"):
+        config.load(p)
+
+
+@pytest.mark.parametrize("text,key", [
+    ('[bsp]\ncandidates = "many"\n', "bsp.candidates"),
+    ('[bvh]\nleaf_size = 2.5\n', "bvh.leaf_size"),
+    ('[mesh.clean]\nweld = 1\n', "mesh.clean.weld"),
+    ('[transform]\nframe = "lefty"\n', "transform.frame"),
+    ('[transform]\nscale = -1\n', "transform.scale"),
+])
+def test_wrong_types_and_values_are_errors_naming_the_key(tmp_path, text, key):
+    with pytest.raises(ConfigError) as e:
+        config.load(write(tmp_path, text))
+    assert key in str(e.value)
+
+
+def test_int_is_accepted_for_float_and_nested_tables(tmp_path):
+    p = write(tmp_path, "[transform]\nscale = 2\n[mesh.simplify]\nenabled = true\ntarget_ratio = 0.5\n"
+                        "[[lighting.lights]]\nkind = \"point\"\nposition = [1, 2, 3]\n")
+    cfg = config.load(p)
+    assert cfg.transform.scale == 2.0 and isinstance(cfg.transform.scale, float)
+    assert cfg.mesh.simplify.enabled and cfg.mesh.simplify.target_ratio == 0.5
+    assert cfg.lighting.lights[0].kind == "point" and cfg.lighting.lights[0].position == [1.0, 2.0, 3.0]
+    assert cfg.base_dir == tmp_path.resolve()
+
+
+def test_overrides_go_through_the_same_checks():
+    cfg = config.load(None, ["bsp.enabled=true", "export.names.vertices=V", "lighting.ao.samples=16"])
+    assert cfg.bsp.enabled is True and cfg.export.names.vertices == "V" and cfg.lighting.ao.samples == 16
+    with pytest.raises(ConfigError, match="did you mean 'lighting.ao.samples'"):
+        config.load(None, ["lighting.ao.sampels=3"])
+    with pytest.raises(ConfigError, match="expected true or false"):
+        config.load(None, ["bsp.enabled=maybe"])
+    with pytest.raises(ConfigError, match="key=value"):
+        config.load(None, ["bsp.enabled"])
+
+
+def test_import_section_uses_toml_name(tmp_path):
+    cfg = config.load(write(tmp_path, "[import]\nstrict = false\n"))
+    assert cfg.import_.strict is False
+    assert "import.strict" in config.all_keys()
+
+
+def test_invalid_toml_names_line(tmp_path):
+    with pytest.raises(ConfigError) as e:
+        config.load(write(tmp_path, "[input]\npath = \n"))
+    assert e.value.line == 2
+
+
+def test_every_key_round_trips_through_set():
+    cfg = config.Config()
+    for key in config.all_keys():
+        val = config.get_key(cfg, key)
+        if isinstance(val, list):
+            continue
+        text = {True: "true", False: "false"}.get(val, None) if isinstance(val, bool) else None
+        if text is None:
+            text = repr(val) if isinstance(val, (int, float)) else f'"{val}"'
+        config.apply_override(cfg, f"{key}={text}")
+        assert config.get_key(cfg, key) == val
+
+
+def test_numeric_keys_cover_sweepable_settings():
+    keys = config.numeric_keys()
+    assert "lighting.ao.samples" in keys and "bsp.candidates" in keys and "bvh.bins" in keys
+    assert "bsp.enabled" not in keys

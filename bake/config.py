@@ -216,6 +216,11 @@ class ExportConfig:
     txt: bool = True
     json: bool = True
     json_name: str = "lists.json"
+    # A fresh <model>.sb3 (lists on the stage, monitors hidden) and <model>.sprite3 (lists local
+    # to a sprite) beside the list files.
+    sb3: bool = True
+    sprite3: bool = True
+    sprite_name: str = "Mesh"
 
 
 @dataclass

@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 from . import config as config_mod
 from .config import Config, ImportJob
-from .errors import BakeError, StageError
+from .errors import BakeError, InputError, StageError
 from .record import StageRecord
 from .scene import Scene
 
@@ -114,6 +114,9 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         except MemoryError:
             raise StageError(f"stage '{spec.name}' ran out of memory") from None
         rec.seconds = rec.seconds or (time.perf_counter() - t)
+        if spec.name == "import" and scene.n_polygons == 0:
+            why = "; ".join(rec.warnings[:3])
+            raise InputError("has no faces to bake" + (f" ({why})" if why else ""), path=scene.source.path)
         if not rec.counts_in:
             rec.counts_in = counts_in
         if not rec.counts_out:

@@ -33,6 +33,7 @@ from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..textures.colors import scratch_numbers
+from . import sb3
 from .numbers import decimals_for, format_numbers, json_array
 
 # A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
@@ -196,6 +197,17 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
                           ensure_ascii=False, separators=(",", ":"))
         files[cfg.json_name] = ('{"format":"scratch-bake lists","version":1,"lists":{' + body +
                                 '},"info":' + meta + "}").encode("utf-8")
+
+    name = scene.source.path.stem if scene.source.path else "model"
+    if cfg.sb3 or cfg.sprite3:
+        values = {k: json.loads(v) for k, v in arrays.items()}
+        if cfg.sb3:
+            data, pj_bytes = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=values),
+                                            sb3.Target(cfg.sprite_name, layer_order=1)])
+            files[f"{name}.sb3"] = data
+            rec.details["project_json_bytes"] = pj_bytes
+        if cfg.sprite3:
+            files[f"{name}.sprite3"] = sb3.write_sprite3(sb3.Target(cfg.sprite_name, lists=values))
 
     new = scene.replace(lists={lst.name: lst for lst in lists})
     new = new.with_artefact("outputs", files).with_artefact("list_info", info)

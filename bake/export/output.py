@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,9 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) ->
     assets = {k: len(v) for k, v in files.items() if k.startswith("assets/")}
     status = write_outputs(out_dir, files, protect=protect, also_ours=REPORT_FILES)
     rep = report_mod.build(result, outputs=status, assets=assets)
-    write_atomic(out_dir / "report.json", report_mod.to_json(rep))
+    # report.json is rewritten by every bake (Make uses it as the "baked" target)
+    if not write_atomic(out_dir / "report.json", report_mod.to_json(rep)):
+        os.utime(out_dir / "report.json")
     write_atomic(out_dir / "report.md", report_mod.to_markdown(rep).encode("utf-8"))
     if depfile is not None:
         deps = [p.resolve() for p in src.files_read]

@@ -42,8 +42,13 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         limits.append({"name": f"list '{name}' items", "value": v["items"], "limit": LIST_ITEM_LIMIT,
                        "ok": v["items"] <= LIST_ITEM_LIMIT,
                        "note": "vanilla `add to list` stops at 200,000 items; loading a longer list works"})
-    pj = PROJECT_BASE_BYTES + sum(v["bytes"] for v in lists.values())
-    limits.append({"name": "project.json bytes (estimated)", "value": pj, "limit": PROJECT_JSON_LIMIT,
+    export = next((r for r in result.records if r.name == "export"), None)
+    real = export.details.get("project_json_bytes") if export else None
+    if real is not None:
+        pj, what = int(real), "project.json bytes (the written .sb3)"
+    else:
+        pj, what = PROJECT_BASE_BYTES + sum(v["bytes"] for v in lists.values()), "project.json bytes (estimated)"
+    limits.append({"name": what, "value": pj, "limit": PROJECT_JSON_LIMIT,
                    "ok": pj <= PROJECT_JSON_LIMIT, "note": "upload limit on scratch.mit.edu"})
     for name, size in (assets or {}).items():
         limits.append({"name": f"asset {name} bytes", "value": size, "limit": ASSET_LIMIT,

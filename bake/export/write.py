@@ -19,28 +19,58 @@ from ..errors import BakeError
 MANIFEST = ".bake-manifest.json"
 
 
-def write_atomic(path: Path, data: bytes) -> bool:
-    """Write ``data`` to ``path`` atomically. Returns False if the file already had these bytes."""
+TMP_SUFFIX = ".bake-tmp"
+
+
+def _same_bytes(path: Path, data: bytes) -> bool:
     try:
-        if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
-            return False
+        return path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data
     except OSError:
-        pass
+        return False
+
+
+def _stage_temp(path: Path, data: bytes) -> Path:
+    """Write ``data`` next to ``path`` under a temporary name, flushed to disk."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=TMP_SUFFIX, dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+    except BaseException:
+        _unlink(Path(tmp))
+        raise
+    return Path(tmp)
+
+
+def _unlink(p: Path) -> None:
+    try:
+        p.unlink()
+    except OSError:
+        pass
+
+
+def write_atomic(path: Path, data: bytes) -> bool:
+    """Write ``data`` to ``path`` atomically. Returns False if the file already had these bytes."""
+    if _same_bytes(path, data):
+        return False
+    tmp = _stage_temp(path, data)
+    try:
         os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _unlink(tmp)
         raise
     return True
+
+
+def remove_orphan_temps(out_dir: Path) -> int:
+    """Temporary files left by a bake that was killed mid-write."""
+    n = 0
+    for p in Path(out_dir).rglob(f".*{TMP_SUFFIX}"):
+        _unlink(p)
+        n += 1
+    return n
 
 
 def _safe_join(root: Path, rel: str) -> Path:
@@ -59,12 +89,27 @@ def write_outputs(out_dir: Path, files: dict[str, bytes], *, protect: set[Path] 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     protect = {p.resolve() for p in (protect or set())}
+    remove_orphan_temps(out_dir)
     status: dict[str, str] = {}
-    for rel in sorted(files):
-        target = _safe_join(out_dir, rel)
-        if target in protect:
-            raise BakeError(f"refusing to overwrite the input file {target} (choose another --out)")
-        status[rel] = "written" if write_atomic(target, files[rel]) else "unchanged"
+    # phase 1: every changed file is written in full under a temporary name
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for rel in sorted(files):
+            target = _safe_join(out_dir, rel)
+            if target in protect:
+                raise BakeError(f"refusing to overwrite the input file {target} (choose another --out)")
+            if _same_bytes(target, files[rel]):
+                status[rel] = "unchanged"
+                continue
+            staged.append((_stage_temp(target, files[rel]), target))
+            status[rel] = "written"
+        # phase 2: renames only (each atomic; together they take microseconds)
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    finally:
+        for tmp, _ in staged:
+            if tmp.exists():
+                _unlink(tmp)
     # remove what the previous bake wrote and this one did not
     man = out_dir / MANIFEST
     try:

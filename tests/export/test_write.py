@@ -15,7 +15,7 @@ def test_unchanged_bytes_keep_timestamp(tmp_path):
     assert write_atomic(p, b"1\n2") is False
     assert p.stat().st_mtime == 1
     assert write_atomic(p, b"1\n3") is True and p.read_bytes() == b"1\n3"
-    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".bake-tmp")]
 
 
 def test_stale_outputs_removed_user_files_kept(tmp_path):
@@ -57,3 +57,29 @@ def test_depfile_escapes_spaces(tmp_path):
     first = text.splitlines()[0]
     assert first.endswith(": \\") and "out\\ dir/lists.json" in first
     assert "my\\ model.obj" in text and f"{tmp_path}/a.mtl:" in text
+
+
+def test_orphan_temps_from_a_killed_bake_are_removed(tmp_path):
+    (tmp_path / "lists").mkdir()
+    orphan = tmp_path / "lists" / ".verts.txt.abc.bake-tmp"
+    orphan.write_text("half")
+    write_outputs(tmp_path, {"lists/verts.txt": b"1"})
+    assert not orphan.exists() and (tmp_path / "lists/verts.txt").read_bytes() == b"1"
+
+
+def test_a_failure_in_phase_one_changes_nothing(tmp_path, monkeypatch):
+    write_outputs(tmp_path, {"a.txt": b"old a", "b.txt": b"old b"})
+    import bake.export.write as w
+    real = w._stage_temp
+    calls = []
+
+    def flaky(path, data):
+        calls.append(path.name)
+        if path.name == "b.txt":
+            raise OSError("disk full")
+        return real(path, data)
+    monkeypatch.setattr(w, "_stage_temp", flaky)
+    with pytest.raises(OSError):
+        write_outputs(tmp_path, {"a.txt": b"new a", "b.txt": b"new b"})
+    assert (tmp_path / "a.txt").read_bytes() == b"old a" and (tmp_path / "b.txt").read_bytes() == b"old b"
+    assert not list(tmp_path.glob(".*bake-tmp"))

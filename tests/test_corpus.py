@@ -28,7 +28,8 @@ MUST_FAIL = {
 def obj_polygon_sizes(path):
     """Independent count: vertex counts of every `f` line in an OBJ file."""
     sizes = []
-    for line in path.read_bytes().decode("latin-1").splitlines():
+    text = path.read_bytes().decode("latin-1").replace("\\\r\n", " ").replace("\\\n", " ")  # continuations
+    for line in text.splitlines():
         parts = line.split()
         if parts and parts[0] == "f":
             sizes.append(len(parts) - 1)

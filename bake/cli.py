@@ -148,6 +148,33 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from . import sweep as sweep_mod
+    from .pipeline import load_config_for
+
+    target = Path(args.target)
+    if not target.exists():
+        raise InputError("file not found", path=target)
+    cfg = load_config_for(target, args.set)
+    key, values = sweep_mod.parse_vary(args.vary)
+    reference = None
+    if args.reference is not None:
+        rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}")
+        reference = rvals[0]
+    out = Path(args.out) if args.out else Path("bake-out") / f"sweep-{target.stem}-{key}"
+    table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out)
+    if not args.quiet:
+        print(f"sweep {key} on {target.name} (reference: {table['reference']})")
+        print(f"  {'value':>10} {'seconds':>9} {'rmse':>10} {'max error':>10}")
+        for r in table["rows"]:
+            print(f"  {r['value']:>10} {r['seconds']:>9.3f} {r.get('rmse', float('nan')):>10.5f} "
+                  f"{r.get('max_error', float('nan')):>10.5f}")
+        if table.get("slope") is not None:
+            print(f"  log-log slope of error against value: {table['slope']:.2f}")
+        print(f"  wrote {out}.json and {out}.png")
+    return 0
+
+
 def cmd_keys(args: argparse.Namespace) -> int:
     cfg = config_mod.Config()
     for key in config_mod.all_keys():
@@ -189,6 +216,16 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--json", action="store_true")
     common(i)
     i.set_defaults(func=cmd_inspect)
+
+    sw = sub.add_parser("sweep", help="bake at several values of one numeric key: seconds and error vs a reference")
+    sw.add_argument("target", help="a model or a config (.toml)")
+    sw.add_argument("--vary", required=True, metavar="KEY=V1,V2,...",
+                    help="e.g. lighting.ao.samples=16,64,256,1024")
+    sw.add_argument("--reference", metavar="VALUE", help="compare against a bake at this value "
+                    "(default: the highest value swept)")
+    sw.add_argument("--out", help="output path without suffix (writes .json and .png)")
+    common(sw)
+    sw.set_defaults(func=cmd_sweep)
 
     k = sub.add_parser("keys", help="list every config key with its default")
     k.set_defaults(func=cmd_keys, set=[], quiet=False)

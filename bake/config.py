@@ -84,7 +84,15 @@ class SimplifyConfig:
     target_triangles: int = 0  # 0 = not set
     target_ratio: float = 0.0  # 0 = not set
     max_error: float = 0.0  # fraction of the bbox diagonal; 0 = not set
-    method: str = "fast"
+    # meshopt: meshoptimizer (keeps input vertices; UV seams and material edges are seams).
+    # fast: fast-simplification. quality: MeshLab quadric edge collapse (slow).
+    method: Literal["meshopt", "fast", "quality"] = "meshopt"
+    # After simplifying, least-squares refit of vertex positions to the original surface
+    # (rounds; 0 = off). Borders and material edges stay where they are.
+    fit_iterations: int = 3
+    # Needs measure_error: rounds of keeping the input vertices where the measured error peaks
+    # and simplifying again; the better result is kept (0 = off).
+    refine_rounds: int = 2
     preserve_border: bool = True
     preserve_materials: bool = True
     measure_error: bool = True
@@ -112,10 +120,18 @@ class BSPConfig:
 @dataclass
 class BVHConfig:
     enabled: bool = False
-    leaf_size: int = 4
-    bins: int = 8
+    leaf_size: int = 4  # most triangles in a leaf (1..14)
+    bins: int = 8  # SAH bins per axis
+    # high: more bins, single-triangle leaves, reinsertion optimiser, then optimal collapse
     quality: Literal["binned", "high"] = "binned"
-    layout: Literal["binary", "wide4", "quantised"] = "binary"
+    # binary: stackless 7-item nodes; wide4: 4-wide float nodes; quantised: 4-wide nodes whose
+    # child boxes are packed small integers (docs/formats-bvh.md)
+    layout: Literal["binary", "wide4", "quantised"] = "quantised"
+    quant_bits: int = 6  # bits per quantised box plane (1..8)
+    # list coordinates are rounded to a power of ten <= diagonal * 10^-precision (0 = exact)
+    precision: int = 5
+    high_seconds: float = 20.0  # time budget of the reinsertion optimiser (quality = "high")
+    list_prefix: str = "bvh"  # lists are "<prefix> nodes", "<prefix> tris", "<prefix> tri ids"
 
 
 @dataclass
@@ -130,6 +146,7 @@ class LightConfig:
     inner_cone: float = 0.0  # degrees
     outer_cone: float = 45.0  # degrees
     range: float = 0.0  # 0 = unbounded
+    name: str = ""
 
 
 @dataclass
@@ -145,6 +162,7 @@ class SkyConfig:
     enabled: bool = False
     color: list[float] = field(default_factory=lambda: [0.6, 0.7, 0.9])
     horizon: list[float] = field(default_factory=lambda: [0.6, 0.7, 0.9])  # gradient bottom
+    ground: list[float] = field(default_factory=lambda: [0.3, 0.3, 0.3])  # below the horizon
     intensity: float = 1.0
     samples: int = 64
 
@@ -175,11 +193,87 @@ class LightingConfig:
     sky: SkyConfig = field(default_factory=SkyConfig)
     shadows: ShadowsConfig = field(default_factory=ShadowsConfig)
     bounces: BouncesConfig = field(default_factory=BouncesConfig)
+    # Colour pipeline (bake/lighting/color.py): "srgb" decodes albedo to linear light and
+    # encodes the result; "linear" multiplies the shown values as they are.
+    color_space: Literal["srgb", "linear"] = "srgb"
+    tonemap: Literal["clamp", "reinhard"] = "clamp"
+    # vertex colours: "color" = lit albedo, "light" = the light alone (engine multiplies).
+    vertex_output: Literal["color", "light"] = "color"
+    # Triangle colour = area average: triangles longer than face_cell x diagonal get interior
+    # sample points (at most face_points_max per triangle).
+    face_cell: float = 0.1
+    face_points_max: int = 16
+    # Split triangles whose colour varies across them (budgeted by max_triangles).
+    subdivide: bool = False
+    max_triangles: int = 20000
+    subdivide_threshold: float = 0.05  # colour difference (0..1, shown values) that splits
+    subdivide_levels: int = 3  # rounds
+    subdivide_min_edge: float = 0.01  # fraction of the diagonal: shorter edges are not split
+
+
+@dataclass
+class LightmapConfig:
+    """Lightmap atlas and texel machinery (bake/textures/lightmap.py); lighting.target = "lightmap"
+    is what fills it with light."""
+
+    enabled: bool = False
+    # xatlas packing: atlas side in texels (xatlas may come out a few % larger); texels per
+    # model unit (0 = xatlas chooses so the charts fit the resolution); texels between charts.
+    resolution: int = 256
+    texels_per_unit: float = 0.0
+    padding: int = 2
+    # xatlas chart options (0 = xatlas default / unlimited)
+    max_chart_area: float = 0.0
+    max_cost: float = 2.0
+    normal_deviation_weight: float = 2.0
+    rotate_charts: bool = True
+    # Texel sampling: supersample x supersample points per texel; push samples that start inside
+    # or behind geometry out to the free side; texels of padding to fill; least-squares seams.
+    supersample: int = 2
+    push_out: bool = True
+    dilate: int = 2
+    stitch_seams: bool = True
+    max_triangles: int = 100000  # larger meshes are refused (xatlas takes 17-26 s at 100k)
+    timeout: float = 120.0  # seconds the xatlas subprocess may run
+    cache_dir: str = ""  # "" = ~/.cache/scratch-bake/xatlas (XDG_CACHE_HOME); "none" = no cache
+    uv_list: str = "lightmap uvs"  # per triangle: u1, v1, u2, v2, u3, v3 in the lightmap
 
 
 @dataclass
 class TexturesConfig:
     enabled: bool = False
+    # An image for every material that has no texture (a model shipped without its .mtl, like
+    # spot); relative paths are relative to the model's folder. "" = none.
+    texture: str = ""
+    # Resampling of material textures (map_Kd / baseColorTexture): an exact width x height
+    # (0 = from the image), else the image shrunk to max_size (0 = no cap); then each side
+    # rounded to a power of two ("none" = keep). filter: nearest or a Pillow filter; wrap: the
+    # filter reads across the edges (repeat addressing).
+    width: int = 0
+    height: int = 0
+    max_size: int = 128
+    power_of_two: Literal["none", "floor", "ceil", "nearest"] = "none"
+    filter: Literal["nearest", "box", "bilinear", "hamming", "bicubic", "lanczos"] = "box"
+    wrap: bool = True
+    # Per-triangle base colour = mean of the texture over the triangle's UV area x material
+    # colour x mean vertex colour -> Scene.face_albedo (and face_colors, the "tri colors" list).
+    # average: mean of linear light ("linear") or of the stored values ("srgb"); average_source:
+    # the texture as loaded ("original") or as resampled for Scratch ("resampled").
+    bake_colors: bool = True
+    average: Literal["linear", "srgb"] = "linear"
+    average_source: Literal["original", "resampled"] = "original"
+    # Which encodings to write for each texture (the record compares all three whatever this says).
+    encodings: list[Literal["list", "textimage", "costume"]] = field(
+        default_factory=lambda: ["list", "textimage", "costume"])
+    color_format: Literal["rgb", "argb", "hex"] = "rgb"  # colour-list items
+    first_row: Literal["top", "bottom"] = "bottom"  # colour-list pixel order
+    textimage_alpha: Literal["auto", "always", "never"] = "auto"
+    # Names; {material} is the (first) material using the texture.
+    list_name: str = "tex {material}"
+    size_list_name: str = "tex {material} size"
+    textimage_list_name: str = "tex {material} textimage"
+    costume_name: str = "tex {material}"
+    lightmap: LightmapConfig = field(default_factory=LightmapConfig)
 
 
 @dataclass
@@ -221,6 +315,16 @@ class ExportConfig:
     sb3: bool = True
     sprite3: bool = True
     sprite_name: str = "Mesh"
+    # The reference reader sprite (custom blocks reading these lists, a pen renderer; its green
+    # flag draws the model) in the .sb3 and as the .sprite3.
+    reader: bool = True
+    sb3_name: str = ""  # file name of the fresh .sb3 ("" = <model>.sb3)
+    # Bake into an existing project: a new .sb3 with our lists put into `into_target` (replacing
+    # same-named lists, monitors hidden), everything else untouched. The input is never written.
+    into: str = ""  # path of the .sb3 (relative to the config file)
+    into_target: str = "Stage"  # "Stage" or a sprite name
+    into_name: str = ""  # the new file's name ("" = <into stem>-<model>.sb3)
+    into_reader: bool = False  # also add the reader sprite (needs into_target = "Stage")
 
 
 @dataclass
@@ -432,6 +536,8 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None,
         cfg.source = src.resolve()
     for ov in overrides or []:
         apply_override(cfg, ov)
+    if cfg.export.into:  # relative to the config file, like input.path
+        cfg.export.into = str(cfg.base_dir / cfg.export.into)
     validate(cfg)
     return cfg
 
@@ -483,6 +589,9 @@ def validate(cfg: Config) -> None:
     need(s.target_triangles >= 0, "mesh.simplify.target_triangles", "must be >= 0")
     need(0 <= s.target_ratio <= 1, "mesh.simplify.target_ratio", "must be between 0 and 1")
     need(s.max_error >= 0, "mesh.simplify.max_error", "must be >= 0")
+    need(s.fit_iterations >= 0, "mesh.simplify.fit_iterations", "must be >= 0")
+    need(s.refine_rounds >= 0, "mesh.simplify.refine_rounds", "must be >= 0")
+    need(s.error_samples >= 100, "mesh.simplify.error_samples", "must be >= 100")
     need(cfg.bvh.leaf_size >= 1, "bvh.leaf_size", "must be >= 1")
     need(cfg.bvh.bins >= 2, "bvh.bins", "must be >= 2")
     need(cfg.bsp.candidates >= 0, "bsp.candidates", "must be >= 0 (0 = all)")

@@ -1,0 +1,128 @@
+"""What every effect shares: the context (tracer, seed), per-effect statistics and the chunked,
+threaded driver over sample points."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .rays import Clock, Timers, Tracer, points_per_chunk
+
+# stream salts: each effect draws from its own random stream
+SALT_AO = 1
+SALT_SKY = 2
+SALT_BOUNCE = 3
+SALT_LIGHT = 100  # + light index
+
+
+class Context:
+    """The tracer (built on first use, in the calling thread), the seed and the timers."""
+
+    def __init__(self, tracer: Tracer | Callable[[], Tracer], seed: int, scale: float | None = None):
+        self._tracer = tracer if isinstance(tracer, Tracer) else None
+        self._factory = None if isinstance(tracer, Tracer) else tracer
+        self.seed = int(seed)
+        self.timers = Timers()
+        self._scale = scale if scale is not None else (self._tracer.scale if self._tracer else None)
+        self.build_seconds = 0.0
+
+    @property
+    def tracer(self) -> Tracer:
+        if self._tracer is None:
+            t = time.perf_counter()
+            self._tracer = self._factory()
+            self.build_seconds += time.perf_counter() - t
+        return self._tracer
+
+    @tracer.setter
+    def tracer(self, value: Tracer) -> None:
+        self._tracer = value
+
+    @property
+    def built(self) -> bool:
+        return self._tracer is not None
+
+    @property
+    def scale(self) -> float:
+        return float(self._scale) if self._scale is not None else self.tracer.scale
+
+    @property
+    def far(self) -> float:
+        """A ray length that reaches every triangle from any point of the scene's box."""
+        return 1.5 * self.scale
+
+
+@dataclass
+class EffectStats:
+    """Rays, time and error of one effect, summed over the batches of points it ran on."""
+
+    name: str
+    samples: int = 0  # rays per point (effective)
+    rays: int = 0
+    points: int = 0
+    seconds: float = 0.0
+    se_sq_sum: float = 0.0
+    bound_sq_sum: float = 0.0
+    se_max: float = 0.0
+    se_n: int = 0
+    ran: bool = False
+    reason: str = ""
+    warnings: list[str] = field(default_factory=list)
+    timers: Timers = field(default_factory=Timers)
+    extra: dict = field(default_factory=dict)
+
+    def add_error(self, se: np.ndarray, floor: np.ndarray | float = 0.0) -> None:
+        """Record per-point standard errors ``se`` that include a resolution ``floor`` (added in
+        quadrature, see ``sampling.mean_and_se``). ``error`` aggregates them without the floor,
+        ``error_bound`` with it."""
+        se = np.asarray(se, dtype=np.float64)
+        if len(se):
+            fl = np.broadcast_to(np.asarray(floor, dtype=np.float64), se.shape)
+            self.se_sq_sum += float(np.maximum(se * se - fl * fl, 0.0).sum())
+            self.bound_sq_sum += float(np.dot(se, se))
+            self.se_max = max(self.se_max, float(se.max()))
+            self.se_n += len(se)
+
+    @property
+    def error(self) -> float:
+        """RMS over the sample points of each point's standard error (sample pairs only): an
+        estimate of the RMSE of this effect's values against the exact ones."""
+        return float(np.sqrt(self.se_sq_sum / self.se_n)) if self.se_n else 0.0
+
+    @property
+    def error_bound(self) -> float:
+        """The same with the per-point resolution floor: conservative."""
+        return float(np.sqrt(self.bound_sq_sum / self.se_n)) if self.se_n else 0.0
+
+    def to_effect(self) -> dict:
+        d = {"name": self.name, "ran": self.ran, "reason": self.reason, "rays": int(self.rays),
+             "seconds": round(self.seconds, 6)}
+        if self.ran:
+            d["error"] = round(self.error, 8)
+            d["error_bound"] = round(self.error_bound, 8)
+            d["error_max"] = round(self.se_max, 8)
+            d["samples"] = int(self.samples)
+            d["points"] = int(self.points)
+            d["timing"] = self.timers.as_dict()
+        d.update(self.extra)
+        return d
+
+
+def drive(ctx: Context, stats: EffectStats, n_points: int, samples: int,
+          work: Callable[[int, int, Clock], None]) -> None:
+    """Run ``work(i0, i1, clock)`` over fixed chunks of the points on the tracer's threads."""
+    t0 = time.perf_counter()
+    timers = Timers()
+    clock = Clock(timers)
+    ctx.tracer.parallel(n_points, points_per_chunk(samples), lambda a, b: work(a, b, clock))
+    stats.seconds += time.perf_counter() - t0
+    stats.timers.merge(timers)
+    ctx.timers.merge(timers)
+    stats.points += n_points
+
+
+def as32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32)

@@ -93,6 +93,9 @@ class SimplifyConfig:
     # Needs measure_error: rounds of keeping the input vertices where the measured error peaks
     # and simplifying again; the better result is kept (0 = off).
     refine_rounds: int = 2
+    # With a triangle target: never accept a result whose measured error (fraction of the
+    # diagonal) exceeds this; stop at more triangles instead and say so (0 = no ceiling).
+    error_ceiling: float = 0.05
     preserve_border: bool = True
     preserve_materials: bool = True
     measure_error: bool = True
@@ -127,7 +130,7 @@ class BVHConfig:
     # binary: stackless 7-item nodes; wide4: 4-wide float nodes; quantised: 4-wide nodes whose
     # child boxes are packed small integers (docs/formats-bvh.md)
     layout: Literal["binary", "wide4", "quantised"] = "quantised"
-    quant_bits: int = 6  # bits per quantised box plane (1..8)
+    quant_bits: int = 6  # bits per quantised box plane (2..8)
     # list coordinates are rounded to a power of ten <= diagonal * 10^-precision (0 = exact)
     precision: int = 5
     high_seconds: float = 20.0  # time budget of the reinsertion optimiser (quality = "high")
@@ -591,6 +594,7 @@ def validate(cfg: Config) -> None:
     need(s.max_error >= 0, "mesh.simplify.max_error", "must be >= 0")
     need(s.fit_iterations >= 0, "mesh.simplify.fit_iterations", "must be >= 0")
     need(s.refine_rounds >= 0, "mesh.simplify.refine_rounds", "must be >= 0")
+    need(s.error_ceiling >= 0, "mesh.simplify.error_ceiling", "must be >= 0 (0 = none)")
     need(s.error_samples >= 100, "mesh.simplify.error_samples", "must be >= 100")
     need(cfg.bvh.leaf_size >= 1, "bvh.leaf_size", "must be >= 1")
     need(cfg.bvh.bins >= 2, "bvh.bins", "must be >= 2")

@@ -13,13 +13,19 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/python -m pip install -q -c constraints.txt -e '.[dev]'
 	touch $(STAMP)
 
+# The real Scratch VM for the tests (scratch-vm + scratch-parser, pinned by vm/package-lock.json).
+# Without npm the VM tests skip and say why.
+vm/node_modules: vm/package.json vm/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then npm ci --prefix vm --no-audit --no-fund && touch vm/node_modules; \
+	else echo "npm not found: the Scratch VM tests will be skipped"; fi
+
 demo: $(STAMP)
 	$(BIN)/bake demo --out bake-demo
 
-test: $(STAMP)
+test: $(STAMP) vm/node_modules
 	$(BIN)/python -m pytest -q -ra
 
-bench: $(STAMP)
+bench: $(STAMP) vm/node_modules
 	mkdir -p benchmarks/results
 	set -e; for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b; done
 

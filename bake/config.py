@@ -118,6 +118,16 @@ class BSPConfig:
     balance_weight: float = 1.0
     coplanar_weight: float = 0.0
     seed: int = 0
+    # Leaves: "priority" (sets drawn in a fixed order valid from every viewpoint, plus peeling),
+    # "convex" (only sets in which no face can hide another), "none" (classic BSP).
+    leaves: Literal["priority", "convex", "none"] = "priority"
+    leaf_max: int = 128  # largest set given the O(n^2) priority test
+    gap_planes: bool = True  # also try the most balanced axis-aligned plane that cuts nothing
+    axis_planes: bool = False  # also try axis planes through the median
+    merge_coplanar: bool = True  # merge coplanar neighbours into convex polygons first
+    epsilon: float = 1e-6  # on-plane tolerance, fraction of the bbox diagonal
+    min_area: float = 1e-12  # smallest fragment, fraction of the diagonal squared
+    plane_decimals: int = 6  # decimals kept in plane normals (offsets: 2 more digits)
 
 
 @dataclass
@@ -239,7 +249,6 @@ class LightmapConfig:
     max_triangles: int = 100000  # larger meshes are refused (xatlas takes 17-26 s at 100k)
     timeout: float = 120.0  # seconds the xatlas subprocess may run
     cache_dir: str = ""  # "" = ~/.cache/scratch-bake/xatlas (XDG_CACHE_HOME); "none" = no cache
-    uv_list: str = "lightmap uvs"  # per triangle: u1, v1, u2, v2, u3, v3 in the lightmap
 
 
 @dataclass
@@ -287,6 +296,7 @@ class ListNames:
     triangle_colors: str = "tri colors"
     vertex_colors: str = "vert colors"
     uvs: str = "tri uvs"
+    lightmap_uvs: str = "lightmap uvs"
     quads: str = "quads"
     ngons: str = "ngons"
     ngon_sizes: str = "ngon sizes"
@@ -302,6 +312,7 @@ class ExportConfig:
     triangle_colors: Literal["auto", "yes", "no"] = "auto"
     vertex_colors: Literal["auto", "yes", "no"] = "auto"
     uvs: Literal["auto", "yes", "no"] = "auto"
+    lightmap_uvs: Literal["auto", "yes", "no"] = "auto"  # auto: when the scene has a lightmap atlas
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
@@ -599,6 +610,12 @@ def validate(cfg: Config) -> None:
     need(cfg.bvh.leaf_size >= 1, "bvh.leaf_size", "must be >= 1")
     need(cfg.bvh.bins >= 2, "bvh.bins", "must be >= 2")
     need(cfg.bsp.candidates >= 0, "bsp.candidates", "must be >= 0 (0 = all)")
+    need(cfg.bsp.leaf_max >= 1, "bsp.leaf_max", "must be >= 1")
+    need(0 < cfg.bsp.epsilon < 1e-2, "bsp.epsilon", "must be > 0 and < 0.01")
+    need(0 <= cfg.bsp.min_area < 1e-4, "bsp.min_area", "must be >= 0 and < 1e-4")
+    need(2 <= cfg.bsp.plane_decimals <= 12, "bsp.plane_decimals", "must be between 2 and 12")
+    need(cfg.bsp.split_weight >= 0 and cfg.bsp.balance_weight >= 0, "bsp.split_weight",
+         "weights must be >= 0")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
     for i, lt in enumerate(cfg.lighting.lights):

@@ -13,11 +13,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 from . import config as config_mod
 from .config import Config, ImportJob
-from .errors import BakeError, InputError, StageError
+from .errors import BakeError, ConfigError, InputError, StageError
 from .record import StageRecord
-from .scene import Scene
+from .scene import MAX_COORDINATE, MIN_EXTENT, Scene
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,8 @@ STAGES: tuple[StageSpec, ...] = (
               lambda c: c.mesh.clean.enabled, "mesh.clean.enabled"),
     StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify,
               lambda c: c.mesh.simplify.enabled, "mesh.simplify.enabled"),
+    StageSpec("textures", "bake.textures.stage:stage", lambda c: c.textures,
+              lambda c: c.textures.enabled, "textures.enabled"),
     StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting,
               lambda c: c.lighting.enabled, "lighting.enabled"),
     StageSpec("bsp", "bake.bsp.stage:stage", lambda c: c.bsp, lambda c: c.bsp.enabled, "bsp.enabled"),
@@ -109,6 +113,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         t = time.perf_counter()
         try:
             scene, rec = fn(scene, spec.section(cfg))
+        except ConfigError as e:
+            raise _in_config_file(e, cfg) from None
         except BakeError:
             raise
         except MemoryError:
@@ -117,6 +123,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         if spec.name == "import" and scene.n_polygons == 0:
             why = "; ".join(rec.warnings[:3])
             raise InputError("has no faces to bake" + (f" ({why})" if why else ""), path=scene.source.path)
+        if spec.name in ("import", "transform"):
+            check_coordinates(scene, spec.name, cfg)
         if not rec.counts_in:
             rec.counts_in = counts_in
         if not rec.counts_out:
@@ -130,6 +138,42 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
                       seconds=time.perf_counter() - t0, config=cfg)
 
 
+def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:
+    """A stage's range check names the key; add the config file and the key's line in it."""
+    if e.path is not None or cfg.source is None or e.key is None:
+        return e
+    try:
+        text = cfg.source.read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = None
+    return ConfigError(e.message, path=cfg.source, line=config_mod._Where(text, cfg.source).line_of(e.key),
+                       key=e.key)
+
+
+def check_coordinates(scene: Scene, stage: str, cfg: Config) -> None:
+    """The used vertices must lie within +-MAX_COORDINATE and span at least MIN_EXTENT (or be one
+    point). The importers name the lines of coordinates that are too large; what is left is a model
+    too small to bake (after import) or a transform that scales it out of range (the key is named)."""
+    used = scene.used_vertex_mask()
+    if not used.any():
+        return
+    p = scene.positions[used]
+    with np.errstate(over="ignore"):
+        big = float(np.abs(p).max())
+        extent = float(np.abs(p.max(axis=0) - p.min(axis=0)).max())
+    small = 0.0 < extent < MIN_EXTENT
+    if big <= MAX_COORDINATE and np.isfinite(big) and not small:
+        return
+    what = (f"the model is only {extent:.3g} across (bake needs at least {MIN_EXTENT:g})" if small else
+            f"coordinates reach {big:.3g}, beyond +-{MAX_COORDINATE:g} (the range bake supports)")
+    if stage == "transform":
+        t = cfg.transform
+        key = "transform.fit" if t.fit > 0 else "transform.scale"
+        raise ConfigError(f"{what} after the transform ({key} = {t.fit if t.fit > 0 else t.scale:g})",
+                          path=cfg.source, key=key)
+    raise InputError(what, path=scene.source.path)
+
+
 def counts(scene: Scene) -> dict[str, int]:
     return {"polygons": scene.n_polygons, "triangles": scene.n_triangles,
             "vertices": scene.n_vertices, "materials": len(scene.materials)}
@@ -139,7 +183,11 @@ def load_config_for(target: str | Path, overrides: list[str] | None = None) -> C
     """``bake run MODEL`` or ``bake run CONFIG.toml``: a config either way."""
     p = Path(target)
     if p.suffix.lower() == ".toml":
-        return config_mod.load(p, overrides)
+        cfg = config_mod.load(p, overrides)
+        if not cfg.input.path:
+            raise ConfigError("no model to bake: set input.path (relative to the config)", path=p,
+                              key="input.path")
+        return cfg
     cfg = config_mod.load(None, overrides)
     cfg.input.path = str(p.resolve())
     cfg.base_dir = Path.cwd()

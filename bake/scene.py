@@ -44,6 +44,13 @@ class Material:
 
 DEFAULT_MATERIAL = Material(name="default")
 
+# The coordinates bake works with (docs/reliability.md): every position within +-MAX_COORDINATE and
+# a model at least MIN_EXTENT across (or a single point). Beyond them, squared lengths and areas
+# overflow or underflow float64 (clean would drop every triangle of a 1e-80 model and weld all its
+# vertices), and the float32 work (ray tracing, simplification) has nothing left to resolve.
+MAX_COORDINATE = 1e30
+MIN_EXTENT = 1e-30
+
 
 @dataclass(frozen=True)
 class Light:
@@ -108,6 +115,11 @@ class Scene:
     # colours
     vertex_colors: np.ndarray | None = None  # (V, 4) float64 in [0, 1]
     face_colors: np.ndarray | None = None  # (T, 4) float64 in [0, 1], per triangle
+    # (T, 4) base colour per triangle from the textures stage (texture mean over the UV area x
+    # material colour x mean vertex colour); None = material x vertex colour. Stages that split or
+    # reorder triangles after it must carry it (and tri_lightmap_uvs) along.
+    face_albedo: np.ndarray | None = None
+    tri_lightmap_uvs: np.ndarray | None = None  # (T, 3, 2) lightmap UVs per corner (v up, in [0, 1])
     # the rest
     materials: tuple[Material, ...] = (DEFAULT_MATERIAL,)
     lights: tuple[Light, ...] = ()
@@ -185,10 +197,13 @@ class Scene:
         return self.positions[self.triangles]
 
     def triangle_albedo(self) -> np.ndarray:
-        """(T, 4) base colour per triangle: material colour times the mean vertex colour."""
+        """(T, 4) base colour per triangle: ``face_albedo`` when set, else the material colour
+        times the mean vertex colour."""
         T = self.n_triangles
         if T == 0:
             return np.zeros((0, 4))
+        if self.face_albedo is not None:
+            return np.array(self.face_albedo, dtype=np.float64)
         mat = np.array([m.color for m in self.materials], dtype=np.float64)
         col = mat[np.clip(self.tri_material, 0, len(mat) - 1)]
         if self.vertex_colors is not None:
@@ -220,9 +235,14 @@ class Scene:
                 assert len(self.tri_polygon) == T
             if self.face_colors is not None:
                 assert self.face_colors.shape == (T, 4)
+            if self.face_albedo is not None:
+                assert self.face_albedo.shape == (T, 4)
+            if self.tri_lightmap_uvs is not None:
+                assert self.tri_lightmap_uvs.shape == (T, 3, 2)
         if self.vertex_colors is not None:
             assert self.vertex_colors.shape == (V, 4)
-        for name in ("positions", "vertex_colors", "face_colors", "poly_uvs", "tri_uvs"):
+        for name in ("positions", "vertex_colors", "face_colors", "poly_uvs", "tri_uvs", "face_albedo",
+                     "tri_lightmap_uvs"):
             a = getattr(self, name)
             if a is not None:
                 assert np.isfinite(a).all(), f"{name} has NaN/Inf"

@@ -22,6 +22,7 @@ The stage writes nothing to disk: it returns the file contents in the artefact `
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import time
@@ -33,7 +34,6 @@ from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..textures.colors import scratch_numbers
-from . import sb3
 from .numbers import decimals_for, format_numbers, json_array
 
 # A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
@@ -158,6 +158,15 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
     if want_uv:
         uv = scene.tri_uvs if scene.tri_uvs is not None else np.zeros((T, 3, 2))
         out.append(ScratchList(n.uvs, uv[keep_mask].ravel(), 6, "u1, v1, u2, v2, u3, v3 per triangle", "number", 4))
+
+    want_lm = cfg.lightmap_uvs == "yes" or (cfg.lightmap_uvs == "auto" and scene.tri_lightmap_uvs is not None)
+    if want_lm:
+        lm = scene.tri_lightmap_uvs if scene.tri_lightmap_uvs is not None else np.zeros((T, 3, 2))
+        img = scene.artefacts.get("lightmap_image")
+        side = max(img.shape[:2]) if img is not None else 4096
+        out.append(ScratchList(n.lightmap_uvs, lm[keep_mask].ravel(), 6,
+                               "lightmap u1, v1, u2, v2, u3, v3 per triangle (v up)", "number",
+                               decimals_for(0.1 / side)))  # a tenth of a texel
     return out
 
 
@@ -199,17 +208,19 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
                                 '},"info":' + meta + "}").encode("utf-8")
 
     name = scene.source.path.stem if scene.source.path else "model"
-    if cfg.sb3 or cfg.sprite3:
+    extra_read: list = []
+    if cfg.sb3 or cfg.sprite3 or cfg.into:
+        # .sb3 / .sprite3 (with the reader sprite) and the bake into an author's project
+        from ..scratch.project import project_outputs
+
         values = {k: json.loads(v) for k, v in arrays.items()}
-        if cfg.sb3:
-            data, pj_bytes = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=values),
-                                            sb3.Target(cfg.sprite_name, layer_order=1)])
-            files[f"{name}.sb3"] = data
-            rec.details["project_json_bytes"] = pj_bytes
-        if cfg.sprite3:
-            files[f"{name}.sprite3"] = sb3.write_sprite3(sb3.Target(cfg.sprite_name, lists=values))
+        projects, extra_read = project_outputs(scene, cfg, values, name, rec)
+        files.update(projects)
 
     new = scene.replace(lists={lst.name: lst for lst in lists})
+    if extra_read:  # the project baked into: protected from overwriting, and a depfile input
+        new = new.replace(source=dataclasses.replace(
+            new.source, files_read=tuple(new.source.files_read) + tuple(extra_read)))
     new = new.with_artefact("outputs", files).with_artefact("list_info", info)
     rec.details["lists"] = info
     rec.seconds = time.perf_counter() - t0

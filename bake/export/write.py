@@ -29,11 +29,30 @@ def _same_bytes(path: Path, data: bytes) -> bool:
         return False
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()  # read once, at import (setting it is process-wide)
+
+
 def _stage_temp(path: Path, data: bytes) -> Path:
-    """Write ``data`` next to ``path`` under a temporary name, flushed to disk."""
+    """Write ``data`` next to ``path`` under a temporary name, flushed to disk. The file gets the
+    mode the target has, or a new file's usual mode (0o666 minus the umask) -- not mkstemp's 0o600,
+    which the rename would otherwise hand on to the output."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        mode = path.stat().st_mode & 0o7777
+    except OSError:
+        mode = 0o666 & ~_UMASK
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=TMP_SUFFIX, dir=path.parent)
     try:
+        try:
+            os.fchmod(fd, mode)
+        except OSError:  # a file system without modes keeps what it has
+            pass
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()

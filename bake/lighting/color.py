@@ -1,9 +1,11 @@
 """The colour pipeline of the light baker, and the pluggable albedo.
 
 1. **Albedo** per triangle, RGBA in [0, 1] as Scratch shows colours (sRGB-encoded): by default
-   the material colour times the triangle's mean vertex colour (``Scene.triangle_albedo``). The
-   textures work plugs in the mean of the texture over the triangle's UV area with
-   :func:`set_albedo_provider` (or passes ``albedo=`` to the stage).
+   the material colour times the triangle's mean vertex colour (``Scene.triangle_albedo``). A
+   stage that knows better puts a provider in ``scene.artefacts["albedo"]`` (a function
+   Scene -> (T, 4), re-evaluated for the current triangles, e.g. after subdivision): the
+   textures stage's mean of the texture over each triangle's UV area. ``albedo=`` passed to the
+   stage overrides both.
 2. **Decode** to linear light (sRGB EOTF) when ``lighting.color_space = "srgb"`` (default);
    ``"linear"`` multiplies the shown values as they are (what many Scratch engines do at run
    time).
@@ -24,17 +26,10 @@ import numpy as np
 from ..textures.colors import linear_to_srgb, srgb_to_linear
 
 AlbedoProvider = Callable[["object"], np.ndarray]  # Scene -> (T, 4) RGBA in [0, 1]
-_PROVIDER: AlbedoProvider | None = None
-
-
-def set_albedo_provider(fn: AlbedoProvider | None) -> None:
-    """Replace the default albedo (material colour x vertex colour); ``None`` restores it."""
-    global _PROVIDER
-    _PROVIDER = fn
 
 
 def triangle_albedo(scene, override: AlbedoProvider | None = None) -> np.ndarray:
-    fn = override or _PROVIDER
+    fn = override or scene.artefacts.get("albedo")
     a = fn(scene) if fn is not None else scene.triangle_albedo()
     a = np.nan_to_num(np.asarray(a, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
     if a.shape != (scene.n_triangles, 4):

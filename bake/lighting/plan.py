@@ -74,8 +74,9 @@ def check_config(cfg: LightingConfig) -> None:
         if not cond:
             raise ConfigError(msg, key=f"lighting.{key}")
 
-    need(cfg.target in ("vertex", "triangle"), "target",
-         "'lightmap' is not implemented by the light baker yet; use 'vertex' or 'triangle'")
+    need(cfg.target in ("vertex", "triangle", "lightmap"), "target", "must be vertex, triangle or lightmap")
+    need(not (cfg.target == "lightmap" and cfg.subdivide), "subdivide",
+         "must be false with target = 'lightmap' (the atlas was unwrapped for the triangles as they are)")
     need(cfg.exposure >= 0, "exposure", "must be >= 0")
     need(len(cfg.ambient) == 3 and min(cfg.ambient) >= 0, "ambient", "must be [r, g, b] >= 0")
     need(cfg.threads >= 0, "threads", "must be >= 0 (0 = all cores)")

@@ -3,6 +3,14 @@
 * **Precision.** Embree works in float32. The scene is moved so that its bounding-box centre is
   the origin *in float64* before the cast to float32, so float32 resolution follows the size of
   the scene, not its distance from the world origin (a model at 1e5 is as exact as one at 0).
+* **Size.** Embree itself misses hits when coordinates are very large or very small (a triangle
+  1e14 away is not hit; nor one 1e-20 away; measured with embreex 4.4). So Embree sees the centred
+  scene multiplied by ``k``, the power of two nearest ``1 / scale`` (about unit size), and every ray
+  origin and length by the same ``k``; hit distances are divided by it. Multiplying by a power of
+  two is exact in float32 and float64, so a scene of ordinary size gets bit-identical hits, and a
+  scene scaled by any power of two gets exactly the same answers. Callers keep working in the
+  centred frame of world-sized units (``origins``, ``to_local``, distances, ``t``); only ``Ng``
+  comes back in Embree's frame (its direction is what callers use).
 * **Robust origins.** embreex fixes ``tnear = 0``, so a ray started on a surface may hit that
   surface. Origins are pushed along the geometric normal by
   ``eps = EPS_SCALE * scale + EPS_POS * |p_local|`` (scene-relative, growing with the magnitude
@@ -15,6 +23,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
@@ -74,7 +83,10 @@ class Tracer:
         self.threads = default_threads(threads)
         self.n_triangles = len(tris)
         self._scene = rtcore_scene.EmbreeScene()
-        local = (pos - self.center).astype(np.float32)
+        # Embree's frame: the centred scene times k, a power of two, so that it is about unit size
+        k = 2.0 ** -round(math.log2(self.scale)) if 0 < self.scale < math.inf else 1.0
+        self.k, self._k32 = k, np.float32(k)
+        local = ((pos - self.center) * k).astype(np.float32)
         if len(tris):
             mesh_construction.TriangleMesh(self._scene, np.ascontiguousarray(local),
                                            np.ascontiguousarray(tris.astype(np.int32)))
@@ -109,16 +121,17 @@ class Tracer:
         if n == 0 or self.n_triangles == 0:
             return np.zeros(n, dtype=bool)
         self._count(n)
-        if isinstance(dist, np.ndarray):
-            dist = np.ascontiguousarray(dist, dtype=np.float32).copy()  # embreex writes into it
+        if isinstance(dist, np.ndarray):  # a copy: embreex writes into it
+            dist = np.ascontiguousarray(dist, dtype=np.float32) * self._k32
         elif dist is not None:
-            dist = float(dist)
-        r = self._scene.run(np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32),
+            dist = float(dist) * self.k
+        r = self._scene.run(np.ascontiguousarray(o, np.float32) * self._k32, np.ascontiguousarray(d, np.float32),
                             dists=dist, query="OCCLUDED")
         return np.asarray(r) == 0
 
     def intersect(self, o: np.ndarray, d: np.ndarray, dist: float | np.ndarray | None = None) -> dict:
-        """Closest hit: ``prim`` (-1 = miss), barycentrics ``u``, ``v``, ``t``, unnormalised ``Ng``."""
+        """Closest hit: ``prim`` (-1 = miss), barycentrics ``u``, ``v``, ``t``, unnormalised ``Ng`` (in
+        Embree's frame: use its direction)."""
         n = len(o)
         if n == 0 or self.n_triangles == 0:
             return {"prim": np.full(n, -1, np.int32), "u": np.zeros(n, np.float32),
@@ -126,12 +139,14 @@ class Tracer:
                     "Ng": np.zeros((n, 3), np.float32)}
         self._count(n)
         if isinstance(dist, np.ndarray):
-            dist = np.ascontiguousarray(dist, dtype=np.float32).copy()
+            dist = np.ascontiguousarray(dist, dtype=np.float32) * self._k32
         elif dist is not None:
-            dist = float(dist)
-        r = self._scene.run(np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32),
+            dist = float(dist) * self.k
+        r = self._scene.run(np.ascontiguousarray(o, np.float32) * self._k32, np.ascontiguousarray(d, np.float32),
                             dists=dist, query="INTERSECT", output=1)
-        return {"prim": r["primID"], "u": r["u"], "v": r["v"], "t": r["tfar"], "Ng": r["Ng"]}
+        with np.errstate(over="ignore"):  # a miss's default far limit may become inf: still a miss
+            t = np.asarray(r["tfar"], np.float32) / self._k32  # back to world-sized units
+        return {"prim": r["primID"], "u": r["u"], "v": r["v"], "t": t, "Ng": r["Ng"]}
 
     # ---------------------------------------------------------------- work distribution
     def parallel(self, n_items: int, chunk: int, work: Callable[[int, int], None]) -> None:

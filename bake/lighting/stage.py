@@ -130,7 +130,7 @@ class Baker:
 
     def levels(self) -> np.ndarray:
         cell = self.cfg.face_cell * self.scale
-        minimum = 1 if self.cfg.target == "triangle" else 0
+        minimum = 1 if self.cfg.target in ("triangle", "lightmap") else 0
         lev = face_levels(self.longest, cell, self.cfg.face_points_max, minimum)
         lev[~(self.area > 0)] = 0  # a degenerate triangle has no inside (and no normal)
         return lev
@@ -448,6 +448,16 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
     else:
         rec.effects.append({"name": "subdivide", "ran": False, "rays": 0, "seconds": 0.0,
                             "reason": "lighting.subdivide = false"})
+    lightmap_figs = None
+    if cfg.target == "lightmap":
+        # per-triangle colours above (a fallback for flat fillers), then every texel of the atlas
+        from .lightmap import bake_lightmap
+
+        out, lightmap_figs = bake_lightmap(out, cfg)
+        rec.effects.append({"name": "lightmap", "ran": True, "reason": "lighting.target = 'lightmap'",
+                            "rays": int(sum(v["rays"] for v in lightmap_figs["rays"].values())),
+                            "seconds": lightmap_figs["seconds"]})
+        rec.accuracy["lightmap seam error (8-bit)"] = lightmap_figs["seam_error_8bit"]
     for st in baker.stats.values():
         for w in st.warnings:
             rec.warn(w)
@@ -457,6 +467,7 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
     rec.seconds = time.perf_counter() - t0
     rec.details = {
         "target": cfg.target,
+        "lightmap": lightmap_figs,
         "threads": default_threads(cfg.threads),
         "points": {"vertices": int(baker.v_done.sum()), "triangles_with_interior_points": int(baker.f_done.sum())},
         "rays": int(sum(st.rays for st in baker.stats.values())),

@@ -249,7 +249,6 @@ def split(positions: np.ndarray, tris: np.ndarray, marked: np.ndarray, edges: np
           edge_id: np.ndarray, tri_uvs: np.ndarray | None, vertex_colors: np.ndarray | None) -> Split:
     """Split triangles along ``marked`` edges (closed: each triangle has 0, 1 or 3 marked edges)."""
     V = len(positions)
-    T = len(tris)
     me = np.flatnonzero(marked)
     mid_of = np.full(len(edges), -1, dtype=np.int64)
     mid_of[me] = V + np.arange(len(me))

@@ -100,12 +100,17 @@ def test_bounces_need_light():
     assert not _eff(rec)["bounces"]["ran"] and "nothing lights" in _eff(rec)["bounces"]["reason"]
 
 
-@pytest.mark.parametrize("key,value", [("target", "lightmap"), ("ao__samples", 0), ("exposure", -1.0),
+@pytest.mark.parametrize("key,value", [("target", "texels"), ("ao__samples", 0), ("exposure", -1.0),
                                        ("bounces__samples", 0), ("max_triangles", -1)])
 def test_bad_config_values_are_config_errors(key, value):
     with pytest.raises(ConfigError) as ei:
         stage(_plane(), cfg(**{key: value}))
     assert "lighting." in str(ei.value)
+
+
+def test_lightmap_target_refuses_subdivision():
+    with pytest.raises(ConfigError, match="lighting.subdivide"):
+        stage(_plane(), cfg(target="lightmap", subdivide=True))
 
 
 def test_empty_scene_is_skipped():

@@ -1,0 +1,150 @@
+"""``lighting.target = "lightmap"``: light every texel of the textures stage's lightmap atlas.
+
+The texel machinery (unwrap, texel samples, splat, dilate, seams) is ``bake.textures.lightmap``;
+this module supplies the light: the lighting stage's own kernels (lights with soft shadows, sky,
+ambient x AO, and a final gather of bounced light from the per-triangle solution) evaluated at
+texel sample points.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from ..errors import ConfigError, StageError
+from ..scene import Scene
+from ..textures.lightmap import LightmapJob, Shader, bake, seam_error
+
+
+def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
+                   samples_per_texel: int = 1) -> tuple[Shader, Callable[[], dict]]:
+    """A shading function for :func:`bake` built from ``bake/lighting``: at each sample, direct
+    light (soft shadows), sky, ambient x AO (the lighting stage's own kernels), plus a final
+    gather of bounced light from the lighting stage's per-triangle solution when
+    ``lighting.bounces.count > 0``. Each texel averages about ``samples_per_texel`` samples, so
+    every ray count (shadows, AO, sky, bounce) is divided by it: a texel gets the rays a vertex
+    would. Returns (shade, ray_stats); ``shade`` gives shown RGB in [0, 1]: the light alone
+    (``output = "light"``, as on a white surface; the engine multiplies its texture) or lit
+    albedo (``"color"``).
+    """
+    import dataclasses as _dc
+
+    from . import color as colmod
+    from .bounce import BounceRays, field_radiance
+    from .plan import make_plan
+    from .sampling import hash_combine
+    from .stage import Baker
+    from .targets import Points
+
+    full = _dc.replace(lighting_cfg, target="triangle", subdivide=False)
+    k = max(1, int(samples_per_texel))
+
+    def per(n: int) -> int:
+        return max(1, -(-int(n) // k))
+
+    cfg = _dc.replace(full, shadows=_dc.replace(full.shadows, samples=per(full.shadows.samples)),
+                      ao=_dc.replace(full.ao, samples=per(full.ao.samples)),
+                      sky=_dc.replace(full.sky, samples=per(full.sky.samples)),
+                      bounces=_dc.replace(full.bounces, samples=per(full.bounces.samples)))
+    plan = make_plan(scene, cfg)
+    baker = Baker(scene, cfg, plan)
+    rad = None
+    field_baker = None
+    if plan.bounces:
+        field_baker = Baker(scene, full, make_plan(scene, full))
+        field_baker.run()  # the per-triangle solution the texels gather bounced light from
+        ef = field_baker.local_irradiance(field_baker.F.val) + field_baker.F.val["indirect"]
+        alb_lin = colmod.decode(field_baker.albedo()[:, :3], cfg.color_space)
+        rad = field_radiance(field_baker.tris, alb_lin, None, ef)
+    albedo = baker.albedo()
+
+    def shade(points: np.ndarray, normals: np.ndarray, tri_ids: np.ndarray) -> np.ndarray:
+        n = len(points)
+        key = (hash_combine(np.arange(n, dtype=np.int64), np.int64(0x4C4D)) & np.uint64((1 << 62) - 1)) \
+            | np.uint64(1 << 62)
+        pts = Points(np.asarray(points, np.float64), np.asarray(normals, np.float64), key,
+                     np.asarray(tri_ids, np.int64))
+        val, _ = baker.evaluate(pts)
+        e = baker.local_irradiance(val)
+        if rad is not None:
+            st = baker.stat("bounces")
+            g, _ = BounceRays(baker.ctx, pts, cfg.bounces.samples, st).gather(rad)
+            e = e + g
+        if output == "color":
+            alb = colmod.decode(albedo[np.asarray(tri_ids, np.int64), :3], cfg.color_space)
+        else:
+            alb = np.ones((n, 3))
+        return colmod.shade(alb, e, cfg.exposure, cfg.tonemap, cfg.color_space)
+
+    def ray_stats() -> dict:
+        out = {name: {"rays": int(st.rays), "seconds": round(float(st.seconds), 6)}
+               for name, st in baker.stats.items()}
+        if field_baker is not None:
+            out["bounce field (per triangle)"] = {
+                "rays": int(sum(st.rays for st in field_baker.stats.values())),
+                "seconds": round(float(sum(st.seconds for st in field_baker.stats.values())), 6)}
+        return out
+
+    return shade, ray_stats
+
+
+
+def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap") -> tuple[Scene, dict]:
+    """``lighting.target = "lightmap"``: light every texel of the textures stage's atlas with the
+    lighting stage's kernels (:func:`light_function`, ``lighting.vertex_output`` = "light" or
+    "color"), then splat, dilate and stitch (:func:`bake`). The image (RGBA uint8, opaque) goes
+    to ``scene.artefacts["lightmap_image"]`` and out in the same encodings as the material
+    textures (``textures.encodings``; names from the textures ``*_name`` keys with
+    ``{material}`` = ``name``). Returns (scene, figures for the lighting record)."""
+    from ..textures.encode import ENCODINGS, encode_texture
+
+    job = scene.artefacts.get("lightmap")
+    if not isinstance(job, LightmapJob):
+        raise StageError("lighting.target = 'lightmap' needs the lightmap atlas: set textures.enabled = true "
+                         "and textures.lightmap.enabled = true (the textures stage runs before lighting)",
+                         key="lighting.target")
+    if job.atlas.n_triangles != scene.n_triangles:
+        raise StageError(f"the lightmap atlas has {job.atlas.n_triangles} triangles but the scene has "
+                         f"{scene.n_triangles} (a stage changed the triangles after the unwrap; "
+                         "lighting.subdivide must be off for lightmaps)", key="lighting.subdivide")
+    t0 = time.perf_counter()
+    output = "light" if getattr(lighting_cfg, "vertex_output", "color") == "light" else "color"
+    shade, ray_stats = light_function(scene, lighting_cfg, output=output,
+                                      samples_per_texel=job.config.supersample ** 2)
+    res = bake(scene, job.atlas, shade, job.config)
+    rgb = np.clip(res.image[:, :, :3], 0.0, 1.0)
+    img8 = np.concatenate([np.rint(rgb * 255.0).astype(np.uint8),
+                           np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    tc = job.textures
+    fmt = {"material": name}
+    enc = encode_texture(name, img8, list_name=tc.list_name.format(**fmt),
+                         size_list_name=tc.size_list_name.format(**fmt),
+                         textimage_list_name=tc.textimage_list_name.format(**fmt),
+                         costume_name=tc.costume_name.format(**fmt), color_format=tc.color_format,
+                         first_row=tc.first_row, textimage_alpha="never")
+    written = {}
+    for e in ENCODINGS:
+        if e not in tc.encodings:
+            written[e] = "not requested (textures.encodings)"
+        elif e == "costume":
+            if enc.sizes["costume"]["under_asset_limit"]:
+                scene = scene.with_artefact("costumes", [*scene.artefacts.get("costumes", []), enc.costume])
+                written[e] = "written"
+            else:
+                written[e] = "not written: over the 10 MB asset limit"
+        else:
+            for lst in enc.lists[e]:
+                if lst.name in scene.lists:
+                    raise ConfigError(f"lightmap list name '{lst.name}' is already used (a material named "
+                                      f"'{name}'?); change the textures.*_name keys", key="textures.list_name")
+                scene = scene.with_list(lst)
+            written[e] = "written"
+    q = seam_error(img8[:, :, :3].astype(np.float64) / 255.0, job.atlas, res.seams)
+    figs = dict(res.figures)
+    figs.update({"output": output, "seam_error_8bit": q["max"], "rays": ray_stats(),
+                 "encodings": {e: {**enc.sizes[e], "written": written[e]} for e in ENCODINGS},
+                 "seconds": round(time.perf_counter() - t0, 6)})
+    scene = scene.with_artefact("lightmap_image", img8)
+    return scene, figs

@@ -1,0 +1,114 @@
+"""Bakes that write Scratch projects, end to end through the CLI, checked in the real VM:
+
+* ``export.into``: an author's engine (its own script reads the global list ``verts``) gets our
+  lists; in scratch-vm its script now reads the new data, the reader sprite added next to it reads
+  the stage lists, scratch-parser accepts the result; the input file is untouched, listed in the
+  depfile, and protected from being overwritten.
+* ``bake demo`` writes ``demo.sb3``, whose green flag draws the model with the pen, in the order of
+  the BSP walk from its camera.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import pytest
+
+from bake import cli
+from bake.bsp.traverse import draw_order
+from bake.export import sb3
+from bake.scratch import blocks as B
+from conftest import corpus_path
+from vm_harness import call, vm  # noqa: F401
+
+
+def _engine(path):
+    """An author's project: global lists verts/tris with old data; sprite Engine sums verts."""
+    scope = B.Scope("Engine", variables=["total", "i"], stage_lists=["verts", "tris"])
+    b = B.Builder(scope)
+    b.define("sum verts", [], [
+        B.set_var("total", 0), B.set_var("i", 1),
+        B.repeat(B.list_length("verts"), [B.change_var("total", B.item(B.var("i"), "verts")),
+                                          B.change_var("i", 1)]),
+    ])
+    stage = sb3.Target("Stage", is_stage=True, lists={"verts": [100, 200], "tris": [1, 1, 1, 1]})
+    engine = sb3.Target("Engine", variables={"total": 0, "i": 0}, blocks=b.build(), layer_order=1)
+    path.write_bytes(sb3.write_sb3([stage, engine])[0])
+    return path
+
+
+def test_bake_into_an_authors_project(tmp_path, vm, capsys):
+    model = corpus_path("cube_quads_mtl", "cube.obj")
+    proj_dir = tmp_path / "proj"
+    proj_dir.mkdir()
+    engine = _engine(proj_dir / "engine.sb3")
+    original = engine.read_bytes()
+    cfg = proj_dir / "bake.toml"
+    cfg.write_text(f'[input]\npath = "{model.as_posix()}"\n[bvh]\nenabled = true\n'
+                   '[export]\ninto = "engine.sb3"\ninto_reader = true\n')
+    out = tmp_path / "out"
+    dep = tmp_path / "bake.d"
+    assert cli.main(["run", str(cfg), "--out", str(out), "--depfile", str(dep), "--quiet"]) == 0
+    merged = out / "engine-cube.sb3"
+    assert merged.is_file() and engine.read_bytes() == original
+    assert str(engine.resolve()) in dep.read_text()
+    rep = json.loads((out / "report.json").read_text())
+    export = next(s for s in rep["stages"] if s["name"] == "export")
+    with zipfile.ZipFile(merged) as z:
+        assert export["details"]["project_json_bytes"] == z.getinfo("project.json").file_size
+    pj = next(x for x in rep["limits"] if x["name"].startswith("project.json"))
+    assert pj["value"] == export["details"]["project_json_bytes"]
+
+    lists = {name: items for t in sb3.load_project(merged)[0]["targets"]
+             for name, items in t.get("lists", {}).values()}
+    res = vm({"load": str(merged), "runs": [
+        call("Engine", "sum verts", variables=["total"]),
+        call("Mesh", "load triangle %s", 2, variables=["x1", "y1", "z1"]),
+        call("Mesh", "bvh ray %s %s %s %s %s %s", 0.3, 0.2, -9, 0, 0, 1, variables=["hit tri"]),
+    ]})
+    assert res["validation"][0]["ok"], res["validation"]
+    assert res["runs"][0]["variables"]["total"] == pytest.approx(sum(lists["verts"]))
+    v = res["runs"][1]["variables"]
+    k = 3 * (lists["tris"][4] - 1)
+    assert [v["x1"], v["y1"], v["z1"]] == lists["verts"][k:k + 3]
+    assert float(res["runs"][2]["variables"]["hit tri"]) > 0  # a ray through the cube hits it
+
+    # the input can never be the output
+    cfg.write_text(f'[input]\npath = "{model.as_posix()}"\n[export]\ninto = "engine.sb3"\n'
+                   'into_name = "engine.sb3"\n')
+    assert cli.main(["run", str(cfg), "--out", str(proj_dir), "--quiet"]) != 0
+    assert "refusing to overwrite" in capsys.readouterr().err
+    assert engine.read_bytes() == original
+    # a sprite that does not exist is named
+    cfg.write_text(f'[input]\npath = "{model.as_posix()}"\n[export]\ninto = "engine.sb3"\ninto_target = "Hero"\n')
+    assert cli.main(["run", str(cfg), "--out", str(out), "--quiet"]) == 3
+    assert "no sprite named 'Hero'" in capsys.readouterr().err
+
+
+def test_demo_writes_a_project_that_draws_the_sample(tmp_path, vm):
+    out = tmp_path / "bake-demo"
+    assert cli.main(["demo", "--out", str(out), "--quiet"]) == 0
+    demo = out / "demo.sb3"
+    res = vm({"load": str(demo), "runs": [{"greenFlag": True, "pen": True, "read": {"lists": ["draw order"]}}]})
+    assert res["validation"][0]["ok"]
+    run = res["runs"][0]
+    assert run["done"]
+    project, _ = sb3.load_project(demo)
+    lists = {name: items for t in project["targets"] for name, items in t["lists"].values()}
+    sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
+    cam = {name: value for name, value in sprite["variables"].values()}
+    # the sample is baked with a BSP tree: the order is the BSP walk from the green flag's camera
+    eye = [cam["cam x"], cam["cam y"], cam["cam z"]]
+    want = draw_order(lists["bsp nodes"], lists["bsp planes"], eye, lists["tris"], lists["verts"],
+                      [bool(x) for x in lists["mat two-sided"]])
+    assert [int(x) for x in run["lists"]["draw order"]] == want
+    assert 0 < len(want) < len(lists["tris"]) // 4  # back faces culled
+    strokes = run["pen"]
+    xs = [s[0] for s in strokes] + [s[2] for s in strokes]
+    ys = [s[1] for s in strokes] + [s[3] for s in strokes]
+    # the model fills a good part of the stage and stays on it
+    assert len(strokes) > 1000
+    assert max(xs) - min(xs) > 150 and max(ys) - min(ys) > 100
+    assert -240 <= min(xs) and max(xs) <= 240 and -180 <= min(ys) and max(ys) <= 180
+    assert len({tuple(s[5:8]) for s in strokes}) >= 3  # several materials' colours

@@ -1,0 +1,194 @@
+"""The reader sprite in the real Scratch VM, against our Python references.
+
+Corpus models and a generated triangle soup are baked through the real pipeline (BVH on, every
+layout); the .sb3 and .sprite3 the export stage writes are validated by scratch-parser, loaded into
+scratch-vm, and the reader's custom blocks are run headless. They must give:
+
+* ``load triangle``: exactly the corners and colour in the lists;
+* ``bvh ray``: bit for bit the hit (triangle, t, u, v) of ``bake.bvh.traverse.trace_one`` run on the
+  lists as written, for rays that hit, graze, miss, run along axes and start inside;
+* ``project vertices``: bit for bit ``readers.project`` (Scratch's degree trig, 10-decimal rounding);
+* ``render``: pen strokes that, rasterised, show at every unambiguous pixel the colour of the
+  triangle a painter's-algorithm rasterisation of the projected triangles (Python) shows there.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bake.bvh.traverse import trace_one
+from bake.export import sb3
+from bake.scratch import readers
+from bake.scratch.project import reader_spec
+from bake.textures.colors import decode_numbers
+from conftest import corpus_path
+from scratch_models import bake, cameras, check_render, encoded_from_lists, project_lists, rays, soup_obj
+from vm_harness import call, vm  # noqa: F401
+
+BAKES = [  # (model, layout, quant bits)
+    ("cube", "binary", 6), ("cube", "quantised", 6),
+    ("suzanne", "binary", 6), ("suzanne", "wide4", 6), ("suzanne", "quantised", 6), ("suzanne", "quantised", 3),
+    ("soup", "binary", 6), ("soup", "wide4", 6), ("soup", "quantised", 5),
+]
+RAYS_PER_BAKE = 12
+LOAD_T = 3
+
+
+def _model(name, tmp):
+    if name == "cube":
+        return corpus_path("cube_quads_mtl", "cube.obj")
+    if name == "suzanne":
+        return corpus_path("suzanne_obj", "suzanne.obj")
+    return soup_obj(tmp / "soup.obj")
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory, vm):
+    """Bake everything, run everything in the VM in one Node process, keep the answers."""
+    tmp = tmp_path_factory.mktemp("readers")
+    cases, jobs = [], []
+    for k, (model, layout, bits) in enumerate(BAKES):
+        res = bake(_model(model, tmp), bvh={"enabled": True, "layout": layout, "quant_bits": bits})
+        files = res.scene.artefacts["outputs"]
+        stem = next(n for n in files if n.endswith(".sb3"))[:-4]
+        sb3_path = tmp / f"{k}-{stem}.sb3"
+        sprite_path = tmp / f"{k}-{stem}.sprite3"
+        sb3_path.write_bytes(files[f"{stem}.sb3"])
+        sprite_path.write_bytes(files[f"{stem}.sprite3"])
+        lists = project_lists(files[f"{stem}.sb3"])
+        spec = reader_spec(res.scene, res.config.export, lists)
+        assert spec.bvh is not None and spec.bvh.layout == layout
+        enc = encoded_from_lists(res.scene.artefacts["bvh"]["encoded"], lists, spec.bvh)
+        rs = rays(lists["verts"], lists["tris"], RAYS_PER_BAKE, seed=k)
+        n_tris = len(lists["tris"]) // 4
+        ts = [1, n_tris, 1 + (7 * k) % n_tris][:LOAD_T]
+        runs = [call("Mesh", "load triangle %s", t, variables=["x1", "y1", "z1", "x2", "y2", "z2", "x3", "y3",
+                                                                 "z3", "tri color"]) for t in ts]
+        runs += [call("Mesh", "bvh ray %s %s %s %s %s %s", *o, *d,
+                      variables=["hit tri", "hit t", "hit u", "hit v", "hit slot"]) for o, d in rs]
+        jobs.append({"load": str(sb3_path), "runs": runs})
+        # the .sprite3 on its own (added to an empty project, as "Upload Sprite" does)
+        jobs.append({"load": str(sprite_path), "runs": runs[:1] + runs[LOAD_T:LOAD_T + 4]})
+        cases.append({"bake": (model, layout, bits), "lists": lists, "enc": enc, "rays": rs, "ts": ts,
+                      "sb3": sb3_path, "sprite3": sprite_path, "spec": spec, "result": res})
+    render_case = _render_jobs(tmp, cases[4], jobs)
+    out = vm({"jobs": jobs}, timeout=600)["jobs"]
+    for k, case in enumerate(cases):
+        case["vm"], case["vm_sprite"] = out[2 * k], out[2 * k + 1]
+    render_case["vm"] = out[2 * len(cases):]
+    return cases, render_case
+
+
+# --------------------------------------------------------------------------- validity
+def test_every_written_project_and_sprite_passes_scratch_parser(baked):
+    cases, render = baked
+    for case in cases:
+        for res, path in ((case["vm"], case["sb3"]), (case["vm_sprite"], case["sprite3"])):
+            assert res["validation"] == [{"file": str(path), "ok": True, "projectVersion": 3}], res["validation"]
+            project, assets = (sb3.load_project(path) if path.suffix == ".sb3" else (None, None))
+            if project is not None:
+                assert sb3.validate_project(project, assets) == []
+    for res in render["vm"]:
+        assert all(v["ok"] for v in res["validation"])
+
+
+# --------------------------------------------------------------------------- mesh
+@pytest.mark.parametrize("k", range(len(BAKES)), ids=["-".join(map(str, b)) for b in BAKES])
+def test_load_triangle_reads_the_lists(baked, k):
+    case = baked[0][k]
+    verts = np.asarray(case["lists"]["verts"], np.float64).reshape(-1, 3)
+    tris = np.asarray(case["lists"]["tris"]).reshape(-1, 4)
+    colours = case["lists"].get("tri colors") or case["lists"]["mat colors"]
+    for t, run in zip(case["ts"], case["vm"]["runs"][:LOAD_T]):
+        v = run["variables"]
+        corners = verts[tris[t - 1, :3] - 1]
+        for c in range(3):
+            assert [v[f"x{c + 1}"], v[f"y{c + 1}"], v[f"z{c + 1}"]] == corners[c].tolist()
+        want = colours[t - 1] if "tri colors" in case["lists"] else colours[tris[t - 1, 3] - 1]
+        assert v["tri color"] == want
+
+
+# --------------------------------------------------------------------------- BVH
+def _check_rays(case, runs, rays_):
+    hits = 0
+    for (o, d), run in zip(rays_, runs):
+        t, slot0, tri_id, u, v, _reads = trace_one(case["enc"], o, d, tmax=readers.BIG)
+        got = run["variables"]
+        # a miss sets "hit tri" with a typed-in 0, which Scratch stores as the text "0"
+        assert float(got["hit tri"]) == tri_id, (o, d)
+        if tri_id:
+            hits += 1
+            assert (got["hit t"], got["hit u"], got["hit v"], got["hit slot"]) == (t, u, v, slot0 + 1), (o, d)
+    return hits
+
+
+@pytest.mark.parametrize("k", range(len(BAKES)), ids=["-".join(map(str, b)) for b in BAKES])
+def test_bvh_query_matches_the_python_traversal_bit_for_bit(baked, k):
+    case = baked[0][k]
+    hits = _check_rays(case, case["vm"]["runs"][LOAD_T:], case["rays"])
+    assert hits >= RAYS_PER_BAKE // 4  # the aimed rays hit: the comparison is not all misses
+    assert _check_rays(case, case["vm_sprite"]["runs"][1:], case["rays"][:4]) >= 0
+
+
+# --------------------------------------------------------------------------- renderer
+def _render_jobs(tmp, case, jobs):
+    """Suzanne with a random colour per triangle (so a pixel's colour names its triangle), with and
+    without back-face culling, rendered from two cameras."""
+    lists = dict(case["lists"])
+    n = len(lists["tris"]) // 4
+    rng = np.random.default_rng(7)
+    lists["tri colors"] = [int(c) for c in rng.choice(np.arange(1 << 24), n, replace=False)]
+    out = {"lists": lists, "files": []}
+    for cull in (False, True):
+        spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors="tri colors"), bvh=None, textimage=False,
+                                  cull_backfaces=cull)
+        sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
+        data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
+        p = tmp / f"render-{int(cull)}.sb3"
+        p.write_bytes(data)
+        for cam in cameras(lists["verts"]):
+            jobs.append({"load": str(p), "runs": [
+                call("Mesh", "set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch),
+                {**call("Mesh", "render", lists=["draw order", "_px", "_py", "_pz"], pen=True)},
+            ]})
+            out["files"].append((cull, cam))
+    return out
+
+
+def test_renderer_draws_the_painters_picture(baked):
+    _cases, render = baked
+    lists = render["lists"]
+    verts = np.asarray(lists["verts"], np.float64)
+    tris = np.asarray(lists["tris"], np.int64).reshape(-1, 4)
+    colours = decode_numbers(lists["tri colors"])[:, :3].astype(int)
+    for (cull, cam), res in zip(render["files"], render["vm"]):
+        run = res["runs"][1]
+        assert run["done"]
+        n = len(tris)
+        order = [int(x) for x in run["lists"]["draw order"]]
+        assert order == list(range(1, n + 1))  # no BSP: list order
+        px, py, pz = readers.project(verts, cam)
+        # projection: bit for bit, including Scratch's rounded degree trig
+        assert run["lists"]["_px"] == px.tolist() and run["lists"]["_py"] == py.tolist()
+        assert run["lists"]["_pz"] == pz.tolist()
+        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, cull)
+        if cull:
+            assert len(run["pen"]) < len(render["vm"][0]["runs"][1]["pen"])  # culling drew less
+
+
+def test_demo_script_and_reader_without_bvh(baked):
+    """The fresh .sb3's green flag renders from the camera the bake chose."""
+    case = baked[0][2]
+    with open(case["sb3"], "rb") as f:
+        project, _ = sb3.load_project(f.read())
+    sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
+    assert sprite["visible"] is False and len(sprite["costumes"]) == 94
+    flags = [b for b in sprite["blocks"].values() if isinstance(b, dict) and b["opcode"] == "event_whenflagclicked"]
+    assert len(flags) == 1
+    names = {b["mutation"]["proccode"] for b in sprite["blocks"].values()
+             if isinstance(b, dict) and b["opcode"] == "procedures_prototype"}
+    assert {"load triangle %s", "render", "bvh ray %s %s %s %s %s %s", "decode textimage %s"} <= names
+    assert json.dumps(project["extensions"]) == '["pen"]'

@@ -29,5 +29,10 @@ bench: $(STAMP) vm/node_modules
 	mkdir -p benchmarks/results
 	set -e; for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b; done
 
+# Fuzz the OBJ/MTL, glTF and .sb3 readers with atheris (not part of `test`); FUZZ_SECONDS per reader.
+fuzz: $(STAMP)
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[dev,fuzz]'
+	$(BIN)/python fuzz/run.py --seconds $${FUZZ_SECONDS:-120}
+
 clean:
 	rm -rf bake-demo bake-out .pytest_cache

@@ -114,7 +114,11 @@ class MeshConfig:
 class BSPConfig:
     enabled: bool = False
     candidates: int = 64  # candidate planes sampled per node (0 = all)
-    split_weight: float = 8.0
+    # score = split_weight * cost + balance_weight * |front - back| - coplanar_weight * coplanar;
+    # cost "triangles": what the cuts add (2 per cut, 1 through a corner, 0 along a diagonal),
+    # "pieces": 1 per fragment cut (qbsp/ZDBSP count; use split_weight 8 for their balance)
+    split_cost: Literal["triangles", "pieces"] = "triangles"
+    split_weight: float = 4.0
     balance_weight: float = 1.0
     coplanar_weight: float = 0.0
     seed: int = 0

@@ -5,7 +5,7 @@
 For teapot, spot and duck (baked by the real pipeline, BSP and BVH on), the reader sprite the bake writes
 is run headless in scratch-vm 5.0.300 (vm/run.js, Node), which counts every block it executes
 (each call of a block's function: a loop block once per iteration, a reporter once per
-evaluation; shadows/literals are not blocks):
+evaluation, variable reporters included; typed-in literals are not blocks):
 
 * BVH query (``bvh ray``) for each layout (binary, wide4, quantised 6 bits) over the primary rays
   of a ``--grid`` pinhole camera over the model's box on the stage (what a ray tracer casts per

@@ -29,8 +29,8 @@
  *     "done": true|false, "lists": {name: [...]}, "variables": {name: value}, "pen": [...]? } ] }
  *
  * "blocks" counts every non-shadow block the VM executes (each call of a block's primitive
- * function: a repeat loop counts once per iteration, a reporter once per evaluation, a custom
- * block call once plus its definition hat once). Pen strokes are recorded without a renderer by
+ * function: a repeat loop counts once per iteration, a reporter once per evaluation, including
+ * variable and argument reporters, a custom block call once plus its definition hat once). Pen strokes are recorded without a renderer by
  * listening to sprite moves while the pen is down: [x0, y0, x1, y1, diameter, r, g, b, a].
  *
  * Facts used (shared/docs/scratch.md section 5): runtime.currentStepTime is null until

@@ -1,9 +1,19 @@
-"""Scratch projects: write .sb3 / .sprite3, validate what we write, read untrusted ones safely.
+"""Scratch projects: write .sb3 / .sprite3, validate what we write, read untrusted ones safely,
+and bake lists into an author's project.
 
 Facts this follows are in shared/docs/scratch.md, section 1: an .sb3 is a ZIP of
 ``project.json`` plus assets named ``<md5>.<ext>``; a .sprite3 holds ``sprite.json`` (one target)
 and its assets; list values are ``["name", [items]]`` with items string/number/boolean only;
 a visible list monitor stores a second copy of the list, so we write monitors hidden.
+
+* :func:`write_sb3` / :func:`write_sprite3`: from :class:`Target` objects (lists, variables,
+  costumes, blocks, e.g. from ``bake.scratch.blocks``); ``extensions`` follow the blocks.
+* :func:`validate_project` / :func:`validate_sprite`: every problem, not just the first.
+* :func:`read_archive`, :func:`load_project`, :func:`load_sprite`: untrusted input, with limits
+  on entries, sizes and compression ratio, and no entry outside the archive root.
+* :func:`merge_into`: a new .sb3 with our lists (and costumes, and extra sprites) put into an
+  existing project; the input is only read.
+* :func:`archive_sizes`: the real project.json and asset sizes of a written archive.
 
 Archives are written deterministically: entries sorted, fixed timestamps, fixed compression
 level, so the same lists give byte-identical files.

@@ -2,27 +2,42 @@
 
 Authors can copy these blocks into their own engines. Every block is a custom block with "run
 without screen refresh" (warp) on. Outputs go to variables and lists of the sprite; temporaries
-start with ``_``.
+start with ``_``. Each reader is proven in the real Scratch VM against the Python reference named
+in the last column (tests/scratch/).
 
-=====================================================  ==========================================
-custom block                                           what it does
-=====================================================  ==========================================
-``load triangle (t)``                                  corners of triangle t into ``x1 y1 z1 ..
-                                                       z3``, its colour into ``tri color``
-``set camera (x) (y) (z) (yaw) (pitch)``               camera position and angles (degrees)
-``project vertices``                                   every vertex into ``_px _py _pz`` (screen
-                                                       x, y and depth)
-``draw triangle (t)``                                  fills triangle t with the pen (flat colour)
-``render``                                             clears the pen layer and draws every
-                                                       triangle in ``draw order`` (the BSP order
-                                                       when the model has a BSP tree)
-``bvh ray (ox) (oy) (oz) (dx) (dy) (dz)``              closest hit along the ray: ``hit tri``
-                                                       (scene triangle, 0 = miss), ``hit t``,
-                                                       ``hit u``, ``hit v``, ``hit slot``
-``decode textimage (text)``                            TextImage v0 -> ``ti colors`` (one colour
-                                                       number per pixel, bottom row first),
-                                                       ``ti width``, ``ti height``
-=====================================================  ==========================================
+==========================================  ===================================  ======================
+custom block                                what it does                         Python reference
+==========================================  ===================================  ======================
+``load triangle (t)``                       corners of triangle t into ``x1 y1   the mesh lists
+                                            z1 .. z3``, its colour into ``tri
+                                            color``
+``set camera (x) (y) (z) (yaw) (pitch)``    camera position and angles (deg)
+``project vertices``                        every vertex into the lists ``_px    :func:`project`
+                                            _py _pz`` (screen x, y, depth)
+``bsp walk (x) (y) (z)``                    painter's order (back to front) for  ``bake.bsp.traverse.
+                                            an eye into ``draw order``; single-  draw_order``
+                                            sided triangles facing away are
+                                            left out (``mat two-sided`` says
+                                            which materials are two-sided)
+``draw triangle (t)``                       fills triangle t with the pen: flat  painter's raster
+                                            colour, scanlines at whole y,
+                                            clipped to the stage
+``render``                                  erase all, project, ``draw order``   painter's raster
+                                            = BSP walk from the camera (list
+                                            order without a BSP tree), draw
+``bvh ray (ox) (oy) (oz) (dx) (dy) (dz)``   closest hit: ``hit tri`` (scene      ``bake.bvh.traverse.
+                                            triangle; 0 on a miss), ``hit t``    trace_one``
+                                            (-1 on a miss), ``hit u``, ``hit
+                                            v``, ``hit slot``
+``decode textimage (text)``                 TextImage v0 -> ``ti colors`` (one   ``bake.textures.
+                                            colour number per pixel, bottom row  textimage.decode``
+                                            first; ARGB with A >= 1 when the
+                                            text has alpha), ``ti width``,
+                                            ``ti height``
+==========================================  ===================================  ======================
+
+Values typed into blocks are text in Scratch, so an output set to a typed-in number (``hit tri``
+on a miss: ``0``) holds the text "0"; Scratch compares and computes with it as a number.
 
 TextImage characters are turned into numbers case-sensitively with costume names: the sprite has
 one costume per alphabet character ("!" .. "~", costume #1 .. #94), and ``switch costume to
@@ -34,7 +49,12 @@ degrees about y (positive turns right) and then ``pitch`` degrees about its x ax
 up). With ``d = p - c``: ``x' = dx*cos(yaw) - dz*sin(yaw)``, ``z' = dx*sin(yaw) + dz*cos(yaw)``,
 ``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; screen
 ``(focal*x'/z'', focal*y''/z'')``. Scratch's ``sin``/``cos`` take degrees and round to 10
-decimals; the reference does the same.
+decimals; the reference does the same. A triangle with a corner at depth <= ``near`` is not
+drawn; ``cull backfaces`` = 1 also skips triangles that are counter-clockwise on screen (the BSP
+walk already culls in 3D, so it is 0 by default).
+
+What the blocks cost in scratch-vm (blocks executed per frame / per ray / per pixel):
+``benchmarks/bench_scratch_vm.py``.
 """
 
 from __future__ import annotations
@@ -172,7 +192,6 @@ class _Reader:
         self.scope_lists = dict(scope_lists)
         self.stage_lists = dict(stage_lists)
         self.procs: list[tuple[str, list[str], list[B.Node]]] = []
-        self.flag: list[B.Node] = []
 
     def v(self, name: str, init: Any = 0) -> B.VarRef:
         self.vars.setdefault(name, init)
@@ -344,9 +363,11 @@ def _camera_blocks(r: _Reader) -> None:
 # ---- BSP
 def _bsp_blocks(r: _Reader) -> None:
     """``bsp walk (x) (y) (z)``: the painter's order for an eye, into ``draw order`` (back to
-    front), single-sided triangles facing away left out. The walk of ``bake/bsp/traverse.py``
-    (docs/formats-bsp.md) with an explicit stack: a record's item number to visit, or its negated
-    item number for "draw its coplanar triangles now"."""
+    front), single-sided triangles facing away left out. The walk of docs/formats-bsp.md with an
+    explicit stack (a record's item number to visit, or its negated item number for "draw its
+    coplanar triangles now"), with the arithmetic of its Python model
+    ``bake.bsp.traverse.draw_order``: the plane test is ``((a*x + b*y) + c*z) - d >= 0``. The lists
+    do not say which materials are two-sided, so the sprite carries ``mat two-sided``."""
     m, s = r.spec.mesh, r.spec.bsp
     nodes, planes = r.lst(s.nodes), r.lst(s.planes)
     order, stack = r.lst("draw order"), r.lst("_bsp stack")

@@ -112,3 +112,28 @@ def test_demo_writes_a_project_that_draws_the_sample(tmp_path, vm):
     assert max(xs) - min(xs) > 150 and max(ys) - min(ys) > 100
     assert -240 <= min(xs) and max(xs) <= 240 and -180 <= min(ys) and max(ys) <= 180
     assert len({tuple(s[5:8]) for s in strokes}) >= 3  # several materials' colours
+
+
+def test_reader_off_and_reader_needing_the_stage(tmp_path):
+    """export.reader = false writes the plain sprite; into_reader with a sprite target is skipped
+    with a warning (a sprite cannot read another sprite's lists)."""
+    from scratch_models import bake
+
+    model = corpus_path("cube_quads_mtl", "cube.obj")
+    res = bake(model, export={"reader": False})
+    files = res.scene.artefacts["outputs"]
+    project, _ = sb3.load_project(files["cube.sb3"])
+    assert project["targets"][1]["blocks"] == {} and project["extensions"] == []
+    sprite, _ = sb3.load_sprite(files["cube.sprite3"])
+    assert sprite["blocks"] == {} and {v[0] for v in sprite["lists"].values()} == {"verts", "tris", "mat colors"}
+
+    stage = sb3.Target("Stage", is_stage=True)
+    engine = tmp_path / "e.sb3"
+    engine.write_bytes(sb3.write_sb3([stage, sb3.Target("Hero", layer_order=1)])[0])
+    res = bake(model, export={"into": str(engine), "into_target": "Hero", "into_reader": True})
+    export = next(r for r in res.records if r.name == "export")
+    assert any("into_reader" in w for w in export.warnings)
+    project, _ = sb3.load_project(res.scene.artefacts["outputs"]["e-cube.sb3"])
+    assert [t["name"] for t in project["targets"]] == ["Stage", "Hero"]
+    assert {v[0] for v in project["targets"][1]["lists"].values()} == {"verts", "tris", "mat colors"}
+    assert engine.resolve() in [p.resolve() for p in res.scene.source.files_read]

@@ -216,6 +216,8 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         values = {k: json.loads(v) for k, v in arrays.items()}
         projects, extra_read = project_outputs(scene, cfg, values, name, rec)
         files.update(projects)
+    for cname, png in scene.artefacts.get("costumes", []) or []:  # texture costumes as files too
+        files[f"assets/{re.sub(r'[^A-Za-z0-9._-]+', '_', cname).strip('._') or 'costume'}.png"] = png
 
     new = scene.replace(lists={lst.name: lst for lst in lists})
     if extra_read:  # the project baked into: protected from overwriting, and a depfile input

@@ -34,6 +34,7 @@ PROJECT_BASE_BYTES = 1_500
 def build(result: BakeResult, outputs: dict[str, str] | None = None,
           assets: dict[str, int] | None = None) -> dict[str, Any]:
     scene = result.scene
+    assets = dict(assets or {})
     info = scene.artefacts.get("list_info", {})
     lists = {name: {"items": v["items"], "stride": v["stride"], "bytes": v["project_json_bytes"],
                     "file": v.get("file"), "doc": v.get("doc", "")} for name, v in info.items()}
@@ -50,6 +51,13 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         pj, what = PROJECT_BASE_BYTES + sum(v["bytes"] for v in lists.values()), "project.json bytes (estimated)"
     limits.append({"name": what, "value": pj, "limit": PROJECT_JSON_LIMIT,
                    "ok": pj <= PROJECT_JSON_LIMIT, "note": "upload limit on scratch.mit.edu"})
+    if export is not None:  # the largest asset inside each written project
+        into = export.details.get("into") or {}
+        for where, sizes in (("the .sb3", export.details.get("sb3_assets", {})),
+                             (into.get("file", ""), into.get("assets", {}))):
+            if sizes:
+                big = max(sizes, key=lambda k: (sizes[k], k))
+                assets.setdefault(f"largest in {where} ({big}, of {len(sizes)})", sizes[big])
     for name, size in (assets or {}).items():
         limits.append({"name": f"asset {name} bytes", "value": size, "limit": ASSET_LIMIT,
                        "ok": size < ASSET_LIMIT, "note": "each asset must be under 10 MB"})

@@ -92,6 +92,17 @@ def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
                            two_sided=[1 if getattr(m, "double_sided", False) else 0 for m in scene.materials])
 
 
+def texture_costumes(scene: Any) -> list[sb3.Costume]:
+    """The textures stage's PNG costumes (``artefacts["costumes"]``: (name, png bytes)) as
+    bitmapResolution-2 costumes centred on the image (sizes read from the PNG header)."""
+    out = []
+    for cname, png in scene.artefacts.get("costumes", []) or []:
+        w = int.from_bytes(png[16:20], "big") if png[:8] == b"\x89PNG\r\n\x1a\n" else 2
+        h = int.from_bytes(png[20:24], "big") if png[:8] == b"\x89PNG\r\n\x1a\n" else 2
+        out.append(sb3.Costume(cname, sb3.Asset(png, "png"), 2, (w / 2.0, h / 2.0)))
+    return out
+
+
 def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                     record: Any = None) -> tuple[dict[str, bytes], list[Path]]:
     """The .sb3 / .sprite3 files of a bake (relative name -> bytes) and the extra input files
@@ -101,13 +112,17 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
     want_reader = bool(_cfg(cfg, "reader", True))
     spec = reader_spec(scene, cfg, values) if want_reader else None
     details = record.details if record is not None else {}
+    costumes = texture_costumes(scene)
     if cfg.sb3:
         sb3_name = _cfg(cfg, "sb3_name", "") or f"{name}.sb3"
         if spec is not None:
             sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values), demo=True)
         else:
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
-        data, pj_bytes = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=values), sprite])
+        targets = [sb3.Target("Stage", is_stage=True, lists=values), sprite]
+        if costumes:  # the texture costumes, in a hidden sprite of their own for stamping engines
+            targets.append(sb3.Target("Textures", costumes=list(costumes), layer_order=2, visible=False))
+        data, pj_bytes = sb3.write_sb3(targets)
         files[sb3_name] = data
         details["project_json_bytes"] = pj_bytes
         details["sb3_assets"] = sb3.archive_sizes(data)["assets"]
@@ -117,6 +132,8 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
             sprite = readers.reader_target(spec, cfg.sprite_name, local_lists=values)
         else:
             sprite = sb3.Target(cfg.sprite_name, lists=values)
+        if costumes:
+            sprite.costumes = list(sprite.costumes) + list(costumes)
         files[f"{name}.sprite3"] = sb3.write_sprite3(sprite)
     into = _cfg(cfg, "into", "")
     if into:
@@ -135,7 +152,7 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                                 "(a sprite cannot read another sprite's lists): reader not added")
             else:
                 sprites.append(readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values)))
-        data = sb3.merge_into(src, target, values, sprites=sprites)
+        data = sb3.merge_into(src, target, values, costumes, sprites=sprites)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)
         details["into"] = {"project": str(src), "target": target, "file": out_name,

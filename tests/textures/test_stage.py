@@ -369,3 +369,28 @@ def test_textured_corpus_bakes_to_every_encoding(name, file, texture, tmp_path):
         assert (out.face_albedo[:, 3] < 0.99).any()
         assert any((np.asarray(out.lists[f"tex {t['name']}"].values) >> 24 < 255).any()
                    for t in rec.details["textures"])
+
+
+@pytest.mark.corpus
+def test_texture_costumes_reach_the_projects_and_assets(tmp_path):
+    """The PNG costume of a texture is a file under assets/, a costume of a hidden "Textures"
+    sprite in the .sb3 and of the .sprite3, byte-identical, and counted against the asset limit."""
+    from bake import pipeline
+    from bake.export import output, sb3
+
+    cfg = pipeline.load_config_for(corpus_path("duck_glb", "Duck.glb"), ["textures.enabled=true"])
+    rep = output.finish(pipeline.run(cfg), tmp_path)
+    pngs = sorted((tmp_path / "assets").glob("*.png"))
+    assert len(pngs) == 1
+    png = pngs[0].read_bytes()
+    project, assets = sb3.load_project(tmp_path / "Duck.sb3")
+    assert sb3.validate_project(project, assets) == []
+    tex = [t for t in project["targets"] if t["name"] == "Textures"][0]
+    assert tex["visible"] is False and tex["costumes"][0]["bitmapResolution"] == 2
+    assert assets[tex["costumes"][0]["md5ext"]] == png
+    entries = sb3.read_archive(tmp_path / "Duck.sprite3")
+    sprite = __import__("json").loads(entries.pop("sprite.json"))
+    assert sb3.validate_sprite(sprite, entries) == []
+    assert any(entries.get(c["md5ext"]) == png for c in sprite["costumes"])
+    names = [lim["name"] for lim in rep["limits"]]
+    assert any(n.startswith("asset assets/") for n in names) and any("largest in the .sb3" in n for n in names)

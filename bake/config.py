@@ -303,7 +303,6 @@ class ListNames:
     lightmap_uvs: str = "lightmap uvs"
     quads: str = "quads"
     ngons: str = "ngons"
-    ngon_sizes: str = "ngon sizes"
 
 
 @dataclass

@@ -1,0 +1,1005 @@
+"""Simplify stage: reduce the triangles to a budget and measure what it cost in shape.
+
+Targets (exactly one): ``target_triangles = N``, ``target_ratio = r`` (of the input count) or
+``max_error = e`` (symmetric Hausdorff distance as a fraction of the bounding-box diagonal; the
+stage searches the smallest triangle count whose measured error stays within ``e``).
+
+Methods (quadric edge collapse, all through compiled libraries):
+
+* ``meshopt`` (default): meshoptimizer (bake/mesh/simplify_meshopt.py). It never moves
+  vertices, so what is kept has the input's exact positions, vertex colours and UVs. The mesh is
+  handed over as *wedges* (one vertex per position + region + UV): meshoptimizer treats vertices
+  that share a position as a seam, so a material edge or a UV seam collapses only along itself,
+  never across, and every output corner keeps its wedge's UV and region. Open borders also
+  collapse only along themselves.
+* ``fast``: fast-simplification. It knows only points and triangles; the mesh is split along
+  material edges so those become open borders, which ``preserve_border`` keeps vertex for
+  vertex. The collapse list is replayed to get the vertex map; each output triangle is one
+  input triangle with corners replaced, so material, UVs and face colour come from that
+  triangle, and each output vertex takes the colour of the closest input vertex merged into it.
+* ``quality``: MeshLab's quadric edge collapse (pymeshlab) with optimal placement and normal
+  checks. Input vertex and triangle numbers ride along as MeshLab's per-vertex and per-face
+  quality, giving the same correspondence as for ``fast``. Material edges are held by leaving
+  the triangles that touch them out of the selection MeshLab may simplify.
+
+After the library:
+
+1. flipped triangles (facing against the input surface under them, see
+   ``simplify_error.flip_votes``) are repaired where possible: turning the edge shared with a
+   neighbour, then moving one free corner back onto the input surface; repairs that cost shape
+   are undone. Triangles still flipped (or on a new non-manifold edge) get the input vertices
+   under them locked and the library runs again (two rounds).
+2. ``fit_iterations`` rounds of least-squares refit of the free vertex positions to the input
+   surface (bake/mesh/simplify_fit.py); kept only if the measured error drops.
+3. the error is measured (``measure_error``); ``refine_rounds`` times the input vertices where
+   it peaks are locked and the whole thing runs again, keeping the better result.
+4. with a triangle target, a result that still has flipped triangles, new non-manifold edges or
+   an error above ``error_ceiling`` is not accepted: the stage backs off to the smallest larger
+   count that is acceptable and says so in the record (no holes on flat CAD-like geometry).
+
+Whatever the method, material edges (and face-colour edges) are kept when
+``preserve_materials``; every output triangle has a valid material, UVs and face colour; vertex
+colours are input values; ``tri_polygon`` is -1 everywhere and the polygon arrays are dropped
+(they describe the input vertex numbering, which simplification replaces).
+
+The record: triangles in/out and the target, seconds per phase (library, fit, checks), the
+symmetric Hausdorff max/mean as fractions of the diagonal (``accuracy``), flipped triangles,
+new non-manifold and mis-oriented edges, material-edge checks, how each attribute was carried,
+and a warning for anything that kept the target from being reached.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import SimplifyConfig
+from ..errors import ConfigError, StageError
+from ..record import StageRecord
+from ..scene import Scene
+from . import simplify_meshopt
+from .simplify_error import (SurfaceIndex, edge_counts, flip_votes, hausdorff, sample_surface, topology,
+                             triangle_normals)
+from .simplify_fit import refit
+
+__all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
+
+METHODS = ("meshopt", "fast", "quality")
+# Rounds of "lock the input vertices under flipped triangles and simplify again".
+_REPAIR_ROUNDS = 2
+# The fit pairs every input vertex (up to this many) and error_samples points with the output.
+_FIT_MAX_VERTICES = 200_000
+# Face colours with more distinct values than this are a colour signal, not flat regions.
+MAX_COLOR_REGIONS = 1024
+
+
+# --------------------------------------------------------------------------- input preparation
+@dataclass
+class _Prepared:
+    V: np.ndarray  # (V, 3) float64 (all scene vertices)
+    F: np.ndarray  # (T, 3) int64
+    region: np.ndarray  # (T,) int64: triangles of one region share material and face colour
+    region_material: np.ndarray  # (R,)
+    region_color: np.ndarray | None  # (R, 4) face colour per region, or None
+    colors_as_regions: bool
+    tri_material: np.ndarray
+    tri_uvs: np.ndarray | None
+    face_colors: np.ndarray | None
+    vertex_colors: np.ndarray | None
+    # input triangles the flip check cannot judge (flagged when the input is checked against
+    # itself: coincident opposite faces, overlapping internal walls)
+    ambiguous: np.ndarray | None = None
+
+
+def _prepare(scene: Scene, cfg: SimplifyConfig) -> _Prepared:
+    F = np.asarray(scene.triangles, np.int64).reshape(-1, 3)
+    T = len(F)
+    mat = np.asarray(scene.tri_material, np.int64) if scene.tri_material is not None else np.zeros(T, np.int64)
+    fc = None if scene.face_colors is None else np.asarray(scene.face_colors, np.float64)
+    colors_as_regions = False
+    if cfg.preserve_materials:
+        cols = [mat[:, None]]
+        if fc is not None:
+            q = np.round(np.clip(fc, 0, 1) * 255).astype(np.int64)
+            if len(np.unique(q, axis=0)) <= MAX_COLOR_REGIONS:
+                cols.append(q)
+                colors_as_regions = True
+        key = np.concatenate(cols, axis=1)
+        uniq, first, region = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        region = region.reshape(-1).astype(np.int64)
+        region_material = mat[first]
+        region_color = fc[first] if colors_as_regions else None
+    else:
+        region = np.zeros(T, np.int64)
+        region_material = mat[:1] if T else np.zeros(1, np.int64)
+        region_color = None
+    return _Prepared(V=np.asarray(scene.positions, np.float64), F=F, region=region,
+                     region_material=region_material, region_color=region_color,
+                     colors_as_regions=colors_as_regions, tri_material=mat,
+                     tri_uvs=None if scene.tri_uvs is None else np.asarray(scene.tri_uvs, np.float64),
+                     face_colors=fc,
+                     vertex_colors=None if scene.vertex_colors is None else np.asarray(scene.vertex_colors))
+
+
+def _region_edge_vertices(F: np.ndarray, region: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """(vertex mask, edges (E,2)) of edges shared by triangles of different regions."""
+    mask = np.zeros(n_vertices, bool)
+    if len(F) == 0:
+        return mask, np.zeros((0, 2), np.int64)
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    r = np.concatenate([region, region, region])
+    order = np.lexsort((r, e[:, 1], e[:, 0]))
+    e, r = e[order], r[order]
+    same_edge = (e[1:] == e[:-1]).all(axis=1)
+    diff = same_edge & (r[1:] != r[:-1])
+    edges = np.unique(e[1:][diff], axis=0) if diff.any() else np.zeros((0, 2), np.int64)
+    mask[edges.ravel()] = True
+    return mask, edges
+
+
+def _nonmanifold_vertices(F: np.ndarray, n_vertices: int) -> np.ndarray:
+    edges, cnt, _ = edge_counts(F)
+    mask = np.zeros(n_vertices, bool)
+    mask[edges[cnt > 2].ravel()] = True
+    return mask
+
+
+# --------------------------------------------------------------------------- backends
+@dataclass
+class _Raw:
+    """What a backend hands back, per output triangle and vertex (vertex-level, not compacted)."""
+    V: np.ndarray  # (n, 3) positions of output vertices
+    F: np.ndarray  # (t, 3) into V
+    src_vertex: np.ndarray  # (n,) input vertex whose attributes this vertex takes
+    region: np.ndarray  # (t,)
+    src_tri: np.ndarray | None  # (t,) input triangle each output triangle is (corner order kept)
+    tri_uvs: np.ndarray | None  # (t, 3, 2) if already known
+    fixed: np.ndarray  # (n,) vertices the fit must not move
+    lib_seconds: float
+    notes: list[str]
+
+
+def _wedges(prep: _Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Wedge ids per corner (T, 3), wedge -> vertex, wedge -> region, wedge -> UV."""
+    T = len(prep.F)
+    corner_v = prep.F.reshape(-1)
+    corner_r = np.repeat(prep.region, 3)
+    cols = [corner_v[:, None], corner_r[:, None]]
+    if prep.tri_uvs is not None:
+        uv = np.ascontiguousarray(prep.tri_uvs.reshape(-1, 2)) + 0.0  # -0.0 -> 0.0
+        cols.append(uv.view(np.int64))
+    key = np.concatenate(cols, axis=1)
+    if key.shape[1] == 2 and len(prep.region_material) == 1:
+        # one region, no UVs: wedges are the vertices themselves
+        nv = len(prep.V)
+        return prep.F.copy(), np.arange(nv), np.zeros(nv, np.int64), None
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(T, 3)
+    wuv = None if prep.tri_uvs is None else prep.tri_uvs.reshape(-1, 2)[first]
+    return inv, corner_v[first], corner_r[first], wuv
+
+
+def _run_meshopt(prep: _Prepared, target: int, cfg: SimplifyConfig, lock: np.ndarray, cap: float) -> _Raw:
+    Fw, w_vertex, w_region, w_uv = _wedges(prep)
+    Vw = prep.V[w_vertex]
+    t = time.perf_counter()
+    # with an error ceiling, meshoptimizer stops before its own error estimate passes it
+    Fo, _ = simplify_meshopt.simplify(Vw, Fw, target, lock=lock[w_vertex] if lock.any() else None,
+                                      target_error=cap if cap > 0 else 1e30, absolute_error=cap > 0)
+    lib = time.perf_counter() - t
+    notes = []
+    reg = w_region[Fo]
+    mixed = int((reg != reg[:, :1]).any(axis=1).sum())
+    if mixed:
+        notes.append(f"{mixed} triangle(s) had corners from different regions; the first corner's region was used")
+    return _Raw(V=prep.V, F=w_vertex[Fo], src_vertex=np.arange(len(prep.V)), region=reg[:, 0], src_tri=None,
+                tri_uvs=None if w_uv is None else w_uv[Fo], fixed=np.zeros(len(prep.V), bool), lib_seconds=lib,
+                notes=notes)
+
+
+def _split_regions(prep: _Prepared, lock: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split vertices shared by several regions: (split faces (T,3), split -> input vertex,
+    split vertex lies on a region edge). Triangles touching a ``lock`` vertex become regions of
+    their own, so their corners are border vertices, which the libraries keep."""
+    region = prep.region
+    R = len(prep.region_material)
+    if lock.any():
+        own = lock[prep.F].any(axis=1)
+        region = np.where(own, R + np.arange(len(prep.F)), region)
+        R = R + len(prep.F)
+    if R <= 1:
+        nv = len(prep.V)
+        return prep.F.copy(), np.arange(nv), np.zeros(nv, bool)
+    key = prep.F * R + region[:, None]
+    uniq, inv = np.unique(key.reshape(-1), return_inverse=True)
+    Fs = inv.reshape(-1, 3)
+    split_vertex = uniq // R
+    counts = np.bincount(split_vertex, minlength=len(prep.V))
+    on_edge = counts[split_vertex] > 1
+    return Fs, split_vertex, on_edge
+
+
+def _closest_member(P_out: np.ndarray, mapping: np.ndarray, P_in: np.ndarray) -> np.ndarray:
+    """For each output vertex, the input vertex mapped to it that lies closest (-1 if none)."""
+    n = len(P_out)
+    src = np.full(n, -1, np.int64)
+    ok = (mapping >= 0) & (mapping < n)
+    ids = np.flatnonzero(ok)
+    if len(ids) == 0:
+        return src
+    d = np.linalg.norm(P_in[ids] - P_out[mapping[ids]], axis=1)
+    order = np.lexsort((ids, d, mapping[ids]))
+    m_sorted = mapping[ids][order]
+    firsts = np.r_[True, m_sorted[1:] != m_sorted[:-1]]
+    src[m_sorted[firsts]] = ids[order][firsts]
+    return src
+
+
+def _weld_copies(V: np.ndarray, F: np.ndarray, src_vertex: np.ndarray, fixed: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Merge output vertices that come from the same input vertex and sit at the same place
+    (the two sides of a material edge that was split for the library)."""
+    key = np.concatenate([src_vertex[:, None], np.ascontiguousarray(V).view(np.int64).reshape(len(V), 3)], axis=1)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    fx = np.zeros(len(first), bool)
+    fx[inv[fixed]] = True
+    return V[first], inv[F], src_vertex[first], fx
+
+
+def _run_fast(prep: _Prepared, target: int, cfg: SimplifyConfig, lock: np.ndarray) -> _Raw:
+    import fast_simplification as fs_lib
+
+    Fs, split_vertex, on_edge = _split_regions(prep, lock)
+    Vs = prep.V[split_vertex]
+    # fast-simplification overshoots small targets: ask again with a corrected target
+    want = target
+    best = None
+    t_lib = 0.0
+    for _ in range(4):
+        t = time.perf_counter()
+        P, Fo, coll = fs_lib.simplify(Vs, Fs.astype(np.int32), target_count=int(max(want, 1)),
+                                      preserve_border=bool(cfg.preserve_border or on_edge.any()),
+                                      return_collapses=True)
+        t_lib += time.perf_counter() - t
+        if best is None or abs(len(Fo) - target) < abs(len(best[1]) - target):
+            best = (P, Fo, coll)
+        if abs(len(Fo) - target) <= 0.01 * target or len(Fo) <= target or want <= 1:
+            break
+        want = int(want * target / max(len(Fo), 1))
+    P, Fo, coll = best
+    t = time.perf_counter()
+    _, _, mapping = fs_lib.replay_simplification(Vs, Fs.astype(np.int32), coll)
+    t_lib += time.perf_counter() - t
+    mapping = np.asarray(mapping, np.int64)
+    Fo = np.asarray(Fo, np.int64)
+    P = np.asarray(P, np.float64)
+    mf = mapping[Fs]
+    alive = (mf[:, 0] != mf[:, 1]) & (mf[:, 1] != mf[:, 2]) & (mf[:, 0] != mf[:, 2])
+    notes: list[str] = []
+    if int(alive.sum()) == len(Fo) and np.array_equal(mf[alive], Fo):
+        src_tri = np.flatnonzero(alive)
+    else:  # should not happen with fast-simplification 0.2; keep going with nearest-surface
+        src_tri = None
+        notes.append("fast-simplification's replay did not match its output; attributes were sampled "
+                     "from the nearest input triangle")
+    member = _closest_member(P, mapping, Vs)
+    src_vertex = np.where(member >= 0, split_vertex[np.maximum(member, 0)], 0)
+    fixed = np.zeros(len(P), bool)
+    fixed[mapping[on_edge]] = True
+    V2, F2, src2, fixed2 = _weld_copies(P, Fo, src_vertex, fixed)
+    region = prep.region[src_tri] if src_tri is not None else np.zeros(len(F2), np.int64)
+    return _Raw(V=V2, F=F2, src_vertex=src2, region=region, src_tri=src_tri, tri_uvs=None, fixed=fixed2,
+                lib_seconds=t_lib, notes=notes)
+
+
+def _run_quality(prep: _Prepared, target: int, cfg: SimplifyConfig, lock: np.ndarray) -> _Raw:
+    import pymeshlab
+
+    Fs, split_vertex, on_edge = _split_regions(prep, lock)
+    Vs = prep.V[split_vertex]
+    # MeshLab may be told to simplify only selected triangles; it then never moves a vertex of
+    # an unselected one. Triangles touching a material edge are left out (listed last, so the
+    # selection is "face index < n"), which keeps the edge exactly.
+    locked = on_edge[Fs].any(axis=1)
+    order = np.argsort(locked, kind="stable")
+    n_sel = int((~locked).sum())
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=Vs, face_matrix=Fs[order].astype(np.int32),
+                               v_scalar_array=np.arange(len(Vs), dtype=np.float64),
+                               f_scalar_array=order.astype(np.float64)))
+    selected = bool(locked.any())
+    if selected:
+        ms.compute_selection_by_condition_per_face(condselect=f"(fi < {n_sel})")
+    t = time.perf_counter()
+    ms.meshing_decimation_quadric_edge_collapse(
+        targetfacenum=int(max(target, 1)), qualitythr=0.3, preserveboundary=bool(cfg.preserve_border),
+        boundaryweight=1.0, preservenormal=True, preservetopology=False, optimalplacement=True,
+        planarquadric=False, autoclean=True, selected=selected)
+    lib = time.perf_counter() - t
+    m = ms.current_mesh()
+    P = np.asarray(m.vertex_matrix(), np.float64)
+    Fo = np.asarray(m.face_matrix(), np.int64)
+    vq = np.rint(np.asarray(m.vertex_scalar_array())).astype(np.int64)
+    fq = np.rint(np.asarray(m.face_scalar_array())).astype(np.int64)
+    notes = []
+    if not ((vq >= 0).all() and (vq < len(Vs)).all() and (fq >= 0).all() and (fq < len(Fs)).all()):
+        raise StageError("MeshLab lost the vertex/face numbering it was given")
+    src_vertex = split_vertex[vq]
+    fixed = on_edge[vq] & (np.linalg.norm(P - Vs[vq], axis=1) == 0)
+    V2, F2, src2, fixed2 = _weld_copies(P, Fo, src_vertex, fixed)
+    return _Raw(V=V2, F=F2, src_vertex=src2, region=prep.region[fq], src_tri=fq, tri_uvs=None, fixed=fixed2,
+                lib_seconds=lib, notes=notes)
+
+
+# --------------------------------------------------------------------------- main entry
+def resolve_target(n_triangles: int, cfg: SimplifyConfig) -> tuple[str, float]:
+    """("triangles", N) or ("error", e) from the config; exactly one target must be set."""
+    set_ = [k for k, v in (("target_triangles", cfg.target_triangles), ("target_ratio", cfg.target_ratio),
+                           ("max_error", cfg.max_error)) if v]
+    if len(set_) != 1:
+        what = "none is set" if not set_ else "got " + ", ".join(set_)
+        raise ConfigError(f"set exactly one of target_triangles, target_ratio, max_error ({what})",
+                          key="mesh.simplify")
+    if cfg.target_triangles:
+        return "triangles", float(cfg.target_triangles)
+    if cfg.target_ratio:
+        return "triangles", float(max(1, int(round(n_triangles * cfg.target_ratio))))
+    return "error", float(cfg.max_error)
+
+
+def _run(prep: _Prepared, method: str, target: int, cfg: SimplifyConfig, lock: np.ndarray, cap: float) -> _Raw:
+    if method == "meshopt":
+        return _run_meshopt(prep, target, cfg, lock, cap)
+    if method == "fast":
+        return _run_fast(prep, target, cfg, lock)
+    if method == "quality":
+        return _run_quality(prep, target, cfg, lock)
+    raise ConfigError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}", key="mesh.simplify.method")
+
+
+@dataclass
+class _Out:
+    V: np.ndarray
+    F: np.ndarray
+    src_vertex: np.ndarray
+    region: np.ndarray
+    src_tri: np.ndarray | None
+    tri_uvs: np.ndarray | None
+    fixed: np.ndarray
+    lib_seconds: float
+    fit_seconds: float
+    fit_info: dict
+    notes: list[str]
+    flipped: np.ndarray  # (t,) bool
+    new_nonmanifold: np.ndarray  # (t,) bool: uses an edge with > 2 triangles the input did not have
+    voted_for: np.ndarray  # (T_in,) output triangle each input triangle stands under (-1: none)
+    check_seconds: float = 0.0
+
+
+def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceIndex,
+            fit_points: np.ndarray | None, protect: np.ndarray, scale: float) -> _Out:
+    """Drop repeated-corner triangles, compact vertices, refit positions, find flips."""
+    F = raw.F
+    ok = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
+    F = F[ok]
+    region = raw.region[ok]
+    src_tri = None if raw.src_tri is None else raw.src_tri[ok]
+    tri_uvs = None if raw.tri_uvs is None else raw.tri_uvs[ok]
+    used = np.zeros(len(raw.V), bool)
+    used[F.ravel()] = True
+    remap = np.cumsum(used) - 1
+    V = raw.V[used]
+    F = remap[F]
+    src_vertex = raw.src_vertex[used]
+    fixed = raw.fixed[used] | protect[src_vertex] & (np.linalg.norm(V - prep.V[src_vertex], axis=1) == 0)
+    if tri_uvs is None and prep.tri_uvs is not None and src_tri is not None:
+        tri_uvs = prep.tri_uvs[src_tri]  # corner order is kept by the libraries
+    tol = 1e-6 * scale
+    t = time.perf_counter()
+    flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
+                   samples=cfg.error_samples)
+    before = (V.copy(), F.copy(), None if tri_uvs is None else tri_uvs.copy(), flipped, voted) if flipped.any() else None
+    edge_flips = 0
+    for _ in range(3):
+        if not flipped.any():
+            break
+        n = _edge_flip_repair(prep, V, F, region, tri_uvs, src_tri, flipped, voted)
+        if n == 0:
+            break
+        edge_flips += n
+        flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
+                   samples=cfg.error_samples)
+    relocated = 0
+    if flipped.any():
+        V = V.copy()
+        relocated = _relocate_repair(prep, V, F, fixed, flipped, voted, index_a)
+        if relocated:
+            flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
+                   samples=cfg.error_samples)
+    if before is not None and (edge_flips or relocated):
+        # repairs act on what the flip check flagged; keep them only if they do not cost shape
+        n = max(cfg.error_samples // 4, 1000)
+        h0 = hausdorff(prep.V, prep.F, before[0], before[1], samples=n, seed=cfg.seed + 9, index_a=index_a)
+        h1 = hausdorff(prep.V, prep.F, V, F, samples=n, seed=cfg.seed + 9, index_a=index_a)
+        if h1.max > 1.1 * h0.max + 1e-12 * scale:
+            V, F, tri_uvs, flipped, voted = before
+            edge_flips = relocated = 0
+    check_s = time.perf_counter() - t
+    fit_s, info = 0.0, {"rounds": 0, "reverted_vertices": 0, "edge_flips": edge_flips,
+                        "relocated_vertices": relocated}
+    if cfg.fit_iterations > 0 and fit_points is not None and len(F):
+        t = time.perf_counter()
+        Vf, fit_info = refit(V, F, fixed, index_a, fit_points, iterations=cfg.fit_iterations,
+                             samples_b=min(cfg.error_samples, 20000), seed=cfg.seed)
+        info.update(fit_info)
+        fit_s = time.perf_counter() - t
+        t = time.perf_counter()
+        # the fit must not turn a triangle against the original surface: put back the corners
+        # of any triangle it flipped, and check again
+        for _ in range(6):
+            fl, vt = flip_votes(prep.V, prep.F, Vf, F, tol, index_a, ignore=prep.ambiguous,
+                   samples=cfg.error_samples)
+            new = fl & ~flipped
+            if not new.any():
+                break
+            back = np.unique(F[new].ravel())
+            moved = back[(Vf[back] != V[back]).any(axis=1)]
+            if len(moved) == 0:
+                break
+            info["reverted_vertices"] = info.get("reverted_vertices", 0) + int(len(moved))
+            Vf[moved] = V[moved]
+        else:
+            fl, vt = flip_votes(prep.V, prep.F, Vf, F, tol, index_a, ignore=prep.ambiguous,
+                   samples=cfg.error_samples)
+        keep_fit = not (fl & ~flipped).any()  # else: could not be repaired vertex by vertex
+        if keep_fit:
+            # the fit works from approximate closest points; keep it only where it measurably
+            # helps (on CAD-like meshes with slivers the correspondences can mislead it)
+            n = max(cfg.error_samples // 4, 1000)
+            h0 = hausdorff(prep.V, prep.F, V, F, samples=n, seed=cfg.seed + 5, index_a=index_a)
+            h1 = hausdorff(prep.V, prep.F, Vf, F, samples=n, seed=cfg.seed + 5, index_a=index_a)
+            keep_fit = h1.max <= h0.max and h1.mean <= h0.mean
+            info["kept"] = bool(keep_fit)
+        else:
+            info["abandoned"] = True
+        if keep_fit:
+            V, flipped, voted = Vf, fl, vt
+        check_s += time.perf_counter() - t
+    return _Out(V=V, F=F, src_vertex=src_vertex, region=region, src_tri=src_tri, tri_uvs=tri_uvs, fixed=fixed,
+                lib_seconds=raw.lib_seconds, fit_seconds=fit_s, fit_info=info, notes=list(raw.notes),
+                flipped=flipped, voted_for=voted, check_seconds=check_s,
+                new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex))
+
+
+def _edge_flip_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, region: np.ndarray,
+                      tri_uvs: np.ndarray | None, src_tri: np.ndarray | None, flipped: np.ndarray,
+                      voted: np.ndarray, limit: int = 256) -> int:
+    """Turn the shared edge of a flipped triangle and a neighbour (in place) when both new
+    triangles then face the way the input surface under the pair does. Only edges inside one
+    region and off UV seams are turned, so materials and UVs stay valid. Works on the few
+    flipped triangles only (at most ``limit``). Returns how many edges were turned."""
+    a_norm = triangle_normals(prep.V, prep.F)
+    a_area = np.linalg.norm(np.cross(prep.V[prep.F[:, 1]] - prep.V[prep.F[:, 0]],
+                                     prep.V[prep.F[:, 2]] - prep.V[prep.F[:, 0]]), axis=1)
+    ref = np.zeros((len(F), 3))
+    ok = voted >= 0
+    np.add.at(ref, voted[ok], a_norm[ok] * a_area[ok, None])
+    # directed edge -> triangle
+    n = max(int(F.max()) + 1, 1)
+    d_key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
+    d_tri = np.tile(np.arange(len(F)), 3)
+    order = np.argsort(d_key, kind="stable")
+    d_key, d_tri = d_key[order], d_tri[order]
+
+    def owner(p: int, q: int) -> int:
+        k = p * n + q
+        i = np.searchsorted(d_key, k)
+        if i < len(d_key) and d_key[i] == k and (i + 1 == len(d_key) or d_key[i + 1] != k):
+            return int(d_tri[i])
+        return -1
+
+    def nrm(tri: np.ndarray) -> np.ndarray:
+        return np.cross(V[tri[1]] - V[tri[0]], V[tri[2]] - V[tri[0]])
+
+    turned = 0
+    touched = np.zeros(len(F), bool)
+    for t in np.flatnonzero(flipped)[:limit]:
+        if touched[t]:
+            continue
+        best = None
+        for k in range(3):
+            p, q, r = F[t, k], F[t, (k + 1) % 3], F[t, (k + 2) % 3]
+            u = owner(q, p)
+            if u < 0 or touched[u] or region[u] != region[t]:
+                continue
+            ku = int(np.flatnonzero(F[u] == q)[0])  # u = (q, p, d) rotated
+            if F[u, (ku + 1) % 3] != p:
+                continue
+            d = F[u, (ku + 2) % 3]
+            if d == r or owner(r, d) >= 0 or owner(d, r) >= 0:
+                continue
+            if tri_uvs is not None:
+                uv_t = {F[t, j]: tri_uvs[t, j] for j in range(3)}
+                uv_u = {F[u, j]: tri_uvs[u, j] for j in range(3)}
+                if not (np.array_equal(uv_t[p], uv_u[p]) and np.array_equal(uv_t[q], uv_u[q])):
+                    continue  # a UV seam runs along this edge
+            t1 = np.array([p, d, r])
+            t2 = np.array([d, q, r])
+            rn = ref[t] + ref[u]
+            score = min(float(nrm(t1) @ rn), float(nrm(t2) @ rn))
+            if score > 0 and (best is None or score > best[0]):
+                best = (score, u, t1, t2, k, ku)
+        if best is None:
+            continue
+        _, u, t1, t2, k, ku = best
+        if tri_uvs is not None:
+            uv = {F[t, j]: tri_uvs[t, j].copy() for j in range(3)}
+            uv.update({F[u, (ku + 2) % 3]: tri_uvs[u, (ku + 2) % 3].copy()})
+            tri_uvs[t] = [uv[x] for x in t1]
+            tri_uvs[u] = [uv[x] for x in t2]
+        F[t], F[u] = t1, t2
+        touched[t] = touched[u] = True
+        turned += 1
+    return turned
+
+
+def _relocate_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, fixed: np.ndarray, flipped: np.ndarray,
+                     voted: np.ndarray, index_a: SurfaceIndex, limit: int = 256) -> int:
+    """Unfold a flipped triangle by moving one of its free corners (in place) to the centre of
+    its neighbours, put back onto the input surface (closest point), when every triangle
+    around that corner then faces the way the input under it does. Returns vertices moved."""
+    a_norm = triangle_normals(prep.V, prep.F)
+    a_area = np.linalg.norm(np.cross(prep.V[prep.F[:, 1]] - prep.V[prep.F[:, 0]],
+                                     prep.V[prep.F[:, 2]] - prep.V[prep.F[:, 0]]), axis=1)
+    ref = np.zeros((len(F), 3))
+    ok = voted >= 0
+    np.add.at(ref, voted[ok], a_norm[ok] * a_area[ok, None])
+    no_vote = np.linalg.norm(ref, axis=1) == 0
+    ref[no_vote] = np.cross(V[F[no_vote, 1]] - V[F[no_vote, 0]], V[F[no_vote, 2]] - V[F[no_vote, 0]])
+    ref[flipped & no_vote] *= -1.0
+    # vertex -> incident triangles (CSR)
+    order = np.argsort(F.ravel(), kind="stable")
+    starts = np.searchsorted(F.ravel()[order], np.arange(len(V) + 1))
+    moved = 0
+    for t in np.flatnonzero(flipped)[:limit]:
+        for v in F[t]:
+            if fixed[v]:
+                continue
+            ring_t = order[starts[v]:starts[v + 1]] // 3
+            ring_v = np.unique(F[ring_t].ravel())
+            ring_v = ring_v[ring_v != v]
+            if len(ring_v) == 0:
+                continue
+            c = V[ring_v].mean(axis=0)
+            _, _, cp = index_a.query(c[None])
+            done = False
+            for cand in (cp[0], c):
+                old = V[v].copy()
+                V[v] = cand
+                tri = F[ring_t]
+                n = np.cross(V[tri[:, 1]] - V[tri[:, 0]], V[tri[:, 2]] - V[tri[:, 0]])
+                if (np.einsum("ij,ij->i", n, ref[ring_t]) > 0).all():
+                    moved += 1
+                    done = True
+                    break
+                V[v] = old
+            if done:
+                break
+    return moved
+
+
+def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.ndarray) -> np.ndarray:
+    """Output triangles on an edge used by more than two triangles, where the input vertices
+    the edge's ends come from were not such an edge in the input."""
+    bad = np.zeros(len(F), bool)
+    edges, cnt, _ = edge_counts(F)
+    nm = edges[cnt > 2]
+    if len(nm) == 0:
+        return bad
+    e_in, c_in, _ = edge_counts(prep.F)
+    n = len(prep.V)
+    old = set((e_in[c_in > 2, 0] * n + e_in[c_in > 2, 1]).tolist())
+    a, b = src_vertex[nm[:, 0]], src_vertex[nm[:, 1]]
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    new = nm[~np.isin(key, np.fromiter(old, np.int64, len(old)))]
+    if len(new) == 0:
+        return bad
+    m = max(int(F.max()) + 1, 1)
+    new_key = new[:, 0] * m + new[:, 1]
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        lo, hi = np.minimum(F[:, i], F[:, j]), np.maximum(F[:, i], F[:, j])
+        bad |= np.isin(lo * m + hi, new_key)
+    return bad
+
+
+def _defects(out: _Out) -> int:
+    return int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
+
+
+def _lock_under(prep: _Prepared, out: _Out) -> np.ndarray:
+    """For each flipped output triangle (or one on a new non-manifold edge), the input vertex
+    under it closest to its centre (the input triangles that stand under it are those whose
+    centroid it is closest to)."""
+    add = np.zeros(len(prep.V), bool)
+    bad = np.flatnonzero(out.flipped | out.new_nonmanifold)
+    under = np.flatnonzero(np.isin(out.voted_for, bad))
+    if len(under) == 0:
+        add[out.src_vertex[out.F[bad].ravel()]] = True
+        return add
+    cand_v = prep.F[under].ravel()
+    cand_t = np.repeat(out.voted_for[under], 3)
+    cen = out.V[out.F[cand_t]].mean(axis=1)
+    d = np.linalg.norm(prep.V[cand_v] - cen, axis=1)
+    order = np.lexsort((cand_v, d, cand_t))
+    first = np.r_[True, cand_t[order][1:] != cand_t[order][:-1]]
+    add[cand_v[order][first]] = True
+    return add
+
+
+def _attributes(prep: _Prepared, out: _Out, index_a: SurfaceIndex | None, notes: list[str]) -> dict:
+    """Material, UVs, face colours and vertex colours for the output."""
+    t = len(out.F)
+    res: dict = {}
+    nearest = None
+
+    def nearest_tri() -> np.ndarray:
+        nonlocal nearest
+        if nearest is None:
+            idx = index_a if index_a is not None else SurfaceIndex(prep.V, prep.F)
+            _, nearest, _ = idx.query(out.V[out.F].mean(axis=1))
+        return nearest
+
+    # material
+    if out.src_tri is not None:
+        res["tri_material"] = prep.tri_material[out.src_tri]
+    elif len(prep.region_material) > 1 or not len(prep.tri_material) or np.all(prep.tri_material == prep.tri_material[0]):
+        res["tri_material"] = prep.region_material[out.region] if len(prep.region_material) > 1 else \
+            np.full(t, int(prep.tri_material[0]) if len(prep.tri_material) else 0, np.int64)
+    else:  # materials not preserved: the material of the input triangle under each centroid
+        res["tri_material"] = prep.tri_material[nearest_tri()]
+        notes.append("materials were not kept as regions (preserve_materials = false): each triangle "
+                     "takes the material of the input triangle nearest its centre")
+    # UVs
+    if prep.tri_uvs is not None:
+        if out.tri_uvs is not None:
+            res["tri_uvs"] = out.tri_uvs
+        elif out.src_tri is not None:
+            res["tri_uvs"] = prep.tri_uvs[out.src_tri]
+        else:
+            res["tri_uvs"] = prep.tri_uvs[nearest_tri()]
+            notes.append("UVs were taken from the input triangle nearest each triangle's centre")
+    # face colours
+    if prep.face_colors is not None:
+        if out.src_tri is not None:
+            res["face_colors"] = prep.face_colors[out.src_tri]
+        elif prep.colors_as_regions and prep.region_color is not None:
+            res["face_colors"] = prep.region_color[out.region]
+        else:
+            res["face_colors"] = prep.face_colors[nearest_tri()]
+            notes.append("face colours vary too much to be kept as regions: each triangle takes the "
+                         "colour of the input triangle nearest its centre")
+    if prep.vertex_colors is not None:
+        res["vertex_colors"] = prep.vertex_colors[out.src_vertex]
+    return res
+
+
+def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord]:
+    """The stage body (see the module docstring)."""
+    t0 = time.perf_counter()
+    rec = StageRecord(name="simplify")
+    T0 = scene.n_triangles
+    rec.counts_in = {"triangles": T0, "vertices": scene.n_vertices, "polygons": scene.n_polygons,
+                     "materials": len(scene.materials)}
+    method = cfg.method
+    if method not in METHODS:
+        raise ConfigError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}",
+                          key="mesh.simplify.method")
+    if T0 == 0:
+        rec.warn("no triangles to simplify")
+        rec.counts_out = dict(rec.counts_in)
+        rec.seconds = time.perf_counter() - t0
+        return scene, rec
+    kind, value = resolve_target(T0, cfg)
+    if method == "meshopt" and not simplify_meshopt.available():
+        rec.warn("meshoptimizer is not installed; used method 'fast' instead")
+        method = "fast"
+    scale = scene.scale()
+    prep = _prepare(scene, cfg)
+    details: dict = {"method": method, "target_kind": kind, "scale": scale,
+                     "regions": int(len(prep.region_material))}
+    if method == "meshopt":
+        details["library"] = f"meshoptimizer {simplify_meshopt.version()}"
+    notes: list[str] = []
+
+    if kind == "triangles" and int(value) >= T0:
+        rec.warn(f"target {int(value)} triangles is not below the input's {T0}; nothing to do")
+        rec.counts_out = dict(rec.counts_in)
+        rec.details = details | {"target_triangles": int(value)}
+        rec.seconds = time.perf_counter() - t0
+        return scene, rec
+
+    index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed)
+    prep.ambiguous = flip_votes(prep.V, prep.F, prep.V, prep.F, 1e-6 * scale, index_a,
+                                samples=cfg.error_samples)[0]
+    if prep.ambiguous.any():
+        details["flip_check_ignored_input_triangles"] = int(prep.ambiguous.sum())
+        notes.append(f"{int(prep.ambiguous.sum())} input triangle(s) overlap opposite-facing surface (double-sided "
+                     "or internal faces); the flip check does not count them")
+    fit_points = None
+    if cfg.fit_iterations > 0:
+        rng = np.random.default_rng(cfg.seed + 3)
+        pts, _, _ = sample_surface(prep.V, prep.F, cfg.error_samples, rng)
+        used_v = np.unique(prep.F.ravel())
+        if len(used_v) > _FIT_MAX_VERTICES:
+            used_v = np.sort(rng.choice(used_v, _FIT_MAX_VERTICES, replace=False))
+        fit_points = np.concatenate([pts, prep.V[used_v]])
+    # vertices the fit leaves alone: material edges and non-manifold edges (open borders may
+    # move: the fit pulls them onto the original surface like any other vertex)
+    edge_mask, region_edges = _region_edge_vertices(prep.F, prep.region, len(prep.V))
+    protect = edge_mask | _nonmanifold_vertices(prep.F, len(prep.V))
+
+    repair_log: list[dict] = []
+
+    cap = float(cfg.error_ceiling) * scale if kind == "triangles" else 0.0
+
+    def attempt(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS) -> _Out:
+        """Simplify; while triangles come out flipped, keep the input vertices under them
+        (locked) and simplify again (a few rounds)."""
+        lock = np.zeros(len(prep.V), bool) if lock0 is None else lock0.copy()
+        best = None
+        for rnd in range(rounds + 1):
+            raw = _run(prep, method, target, cfg, lock, cap)
+            out = _finish(prep, raw, cfg, index_a, fit_points, protect, scale)
+            n_flip = int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
+            if best is None or n_flip < int(best.flipped.sum()) + int(best.new_nonmanifold.sum()):
+                best = out
+            if n_flip == 0 or rnd == rounds:
+                break
+            add = _lock_under(prep, out)
+            if not (add & ~lock).any():
+                break
+            lock |= add
+            repair_log.append({"target": int(target), "round": rnd + 1, "flipped": int(out.flipped.sum()),
+                               "on_new_nonmanifold_edges": int(out.new_nonmanifold.sum()),
+                               "locked_vertices": int(lock.sum())})
+        return best
+
+    def measure(out: _Out):
+        return hausdorff(prep.V, prep.F, out.V, out.F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
+
+    probes: list[dict] = []
+    if kind == "triangles":
+        target = int(value)
+        out = attempt(target)
+        h = measure(out) if cfg.measure_error else None
+
+        def acceptable(o: _Out, hh) -> bool:
+            return _defects(o) == 0 and (hh is None or cap <= 0 or hh.max <= cap)
+
+        if not acceptable(out, h):
+            # fewer triangles cost flips, non-manifold edges or more than the ceiling: find the
+            # smallest count above the target that does not
+            why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
+                   f"non-manifold edges" if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
+            n, o2, h2 = _back_off(target, T0, attempt, measure if cfg.measure_error else None, acceptable,
+                                  probes, scale)
+            if o2 is not None:
+                rec.warn(f"{target} triangles would cost {why} (error_ceiling = {cfg.error_ceiling}); "
+                         f"stopped at {len(o2.F)} triangles instead")
+                out, h = o2, h2
+                details["backed_off_from"] = target
+            details["probes"] = probes
+        if h is not None and cfg.refine_rounds:
+            # keep the input vertices of the triangle where the error peaked and try again;
+            # the better result (no more flips, smaller maximum) is kept
+            wlock = np.zeros(len(prep.V), bool)
+            last = h
+            for _ in range(cfg.refine_rounds):
+                _, wt, _ = index_a.query(last.worst_point[None])
+                wlock[prep.F[wt[0]]] = True
+                o2 = attempt(target, wlock)
+                hw = measure(o2)
+                keep = bool(hw.max < h.max and _defects(o2) <= _defects(out)
+                            and len(o2.F) <= max(len(out.F), target * 1.01)
+                            and abs(len(o2.F) - target) <= max(abs(len(out.F) - target), 0.01 * target))
+                details.setdefault("refine_rounds", []).append(
+                    {"locked_vertices": int(wlock.sum()), "hausdorff_max": float(hw.max / scale), "kept": keep})
+                if keep:
+                    out, h = o2, hw
+                last = hw
+    else:
+        target, out, h = _search_error(prep, method, value * scale, T0, attempt, measure, probes, scale)
+        details["max_error_target"] = value
+        details["probes"] = probes
+    notes.extend(out.notes)
+    attrs = _attributes(prep, out, index_a, notes)
+
+    # ---- checks
+    topo_in = topology(prep.F)
+    topo_out = topology(out.F)
+    flips = out.flipped
+    out_edge_mask, out_region_edges = _region_edge_vertices(out.F, out.region, len(out.V))
+    off_boundary = int((out_edge_mask & ~edge_mask[out.src_vertex]).sum())
+    moved_boundary = int((out_edge_mask & (np.linalg.norm(out.V - prep.V[out.src_vertex], axis=1) > 0)).sum())
+
+    T1 = len(out.F)
+    if kind == "triangles":
+        miss = abs(T1 - target) / max(target, 1)
+        if miss > 0.01 and "backed_off_from" not in details:
+            why = []
+            if len(prep.region_material) > 1:
+                why.append(f"{len(region_edges)} material/colour edges are kept")
+            if cfg.preserve_border and topo_in["open_edges"]:
+                why.append(f"{topo_in['open_edges']} open border edges are kept")
+            if prep.tri_uvs is not None and method == "meshopt":
+                why.append("UV seams collapse only along themselves")
+            if topo_in["nonmanifold_edges"]:
+                why.append(f"{topo_in['nonmanifold_edges']} non-manifold edges")
+            rec.warn(f"got {T1} triangles for a target of {target} ({miss:.1%} off): "
+                     + ("; ".join(why) if why else "the library stopped (no collapse left that keeps the mesh valid)"))
+    new_nm = max(0, topo_out["nonmanifold_edges"] - topo_in["nonmanifold_edges"])
+    new_mis = max(0, topo_out["misoriented_edges"] - topo_in["misoriented_edges"])
+    if int(flips.sum()):
+        rec.warn(f"{int(flips.sum())} triangle(s) face against the original surface")
+    if new_nm or new_mis:
+        rec.warn(f"{new_nm} new non-manifold edge(s), {new_mis} new mis-oriented edge(s)")
+    if off_boundary or moved_boundary:
+        rec.warn(f"{off_boundary} material-edge vertices are not input material-edge vertices; "
+                 f"{moved_boundary} moved")
+    for n in notes:
+        rec.warn(n)
+
+    # ---- the new scene
+    new = scene.replace(
+        positions=np.ascontiguousarray(out.V, np.float64),
+        triangles=out.F.astype(np.int64),
+        tri_material=np.asarray(attrs["tri_material"], np.int64),
+        tri_uvs=attrs.get("tri_uvs"),
+        tri_polygon=np.full(T1, -1, np.int64),
+        face_colors=attrs.get("face_colors"),
+        vertex_colors=attrs.get("vertex_colors"),
+        poly_sizes=None, poly_indices=None, poly_material=None, poly_uvs=None,
+    )
+    new.validate()
+
+    rec.counts_out = {"triangles": T1, "vertices": new.n_vertices, "polygons": 0, "materials": len(new.materials)}
+    if h is not None:
+        rec.accuracy = {"hausdorff_max": h.max / scale, "hausdorff_mean": h.mean / scale,
+                        "hausdorff_max_original_to_simplified": h.max_a_to_b / scale,
+                        "hausdorff_max_simplified_to_original": h.max_b_to_a / scale}
+    rec.accuracy.update({"flipped_triangles": int(flips.sum()), "new_nonmanifold_edges": new_nm,
+                         "new_misoriented_edges": new_mis})
+    details.update({
+        "target_triangles": int(target),
+        "library_seconds": round(out.lib_seconds, 6),
+        "fit_seconds": round(out.fit_seconds, 6),
+        "check_seconds": round(out.check_seconds, 6),
+        "flip_repairs": repair_log,
+        "fit": out.fit_info,
+        "error_samples": int(cfg.error_samples) if h is not None else 0,
+        "error_metric": "symmetric Hausdorff over all vertices + area-weighted samples, exact point-triangle "
+                        "distances (bake/mesh/simplify_error.py); fractions of the bbox diagonal",
+        "worst_point": None if h is None else [float(x) for x in h.worst_point],
+        "topology_in": topo_in, "topology_out": topo_out,
+        "material_edges_in": int(len(region_edges)), "material_edges_out": int(len(out_region_edges)),
+        "material_edge_vertices_off_input_edges": off_boundary,
+        "material_edge_vertices_moved": moved_boundary,
+        "attributes": _attribute_notes(prep, out, method),
+        "polygons": "dropped: every output triangle has tri_polygon = -1",
+    })
+    rec.details = details
+    rec.seconds = time.perf_counter() - t0
+    return new, rec
+
+
+def _attribute_notes(prep: _Prepared, out: _Out, method: str) -> dict:
+    how = {}
+    if method == "meshopt":
+        how["uvs"] = "exact input corner values (UV seams kept as meshoptimizer seams)"
+        how["material"] = "region of the corners' wedges (material edges kept as seams)"
+        how["vertex_colors"] = "exact (vertices are a subset of the input's)"
+    else:
+        how["uvs"] = "the corners of the input triangle each output triangle descends from"
+        how["material"] = "the input triangle each output triangle descends from"
+        how["vertex_colors"] = "the closest input vertex merged into each output vertex"
+    how["face_colors"] = "region colour" if prep.colors_as_regions else "source or nearest input triangle"
+    return how
+
+
+def _back_off(target: int, T0: int, attempt, measure, acceptable, probes: list, scale: float):
+    """Smallest count in (target, T0] whose result is acceptable (grow by 30% until one is,
+    then bisect a few times). Returns (count, out, hausdorff) or (target, None, None)."""
+    tried: dict[int, tuple] = {}
+
+    def probe(n: int) -> bool:
+        out = attempt(n, None, 0)  # no lock-and-retry rounds here: backing off is the repair
+        h = measure(out) if measure is not None else None
+        ok = acceptable(out, h)
+        tried[n] = (out, h, ok)
+        probes.append({"target": n, "triangles": int(len(out.F)), "defects": _defects(out),
+                       "hausdorff_max": None if h is None else float(h.max) / scale, "ok": ok})
+        return ok
+
+    bad, good, n = target, None, target
+    while good is None and n < T0:
+        # grow faster once small steps keep failing (at most ~8 probes to reach the input)
+        step = 1.3 if len(tried) < 3 else 1.8
+        n = min(T0, max(n + 1, int(np.ceil(n * step))))
+        if probe(n):
+            good = n
+        else:
+            bad = n
+    if good is None:
+        return target, None, None
+    for _ in range(3):
+        if good - bad <= max(1, int(0.02 * good)):
+            break
+        mid = (good + bad) // 2
+        if probe(mid):
+            good = mid
+        else:
+            bad = mid
+    out, h, _ = tried[good]
+    return good, out, h
+
+
+def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, attempt, measure, probes: list,
+                  scale: float):
+    """Smallest triangle count (within ~5%) whose measured Hausdorff max is <= e_abs."""
+    tried: dict[int, tuple] = {}
+
+    def probe(n: int):
+        n = int(min(max(n, 4), T0))
+        if n in tried:
+            return tried[n]
+        out = attempt(n)
+        h = measure(out)
+        tried[n] = (out, h)
+        probes.append({"target": n, "triangles": int(len(out.F)), "hausdorff_max": float(h.max) / scale,
+                       "defects": _defects(out), "ok": bool(h.max <= e_abs and _defects(out) == 0)})
+        return tried[n]
+
+    # first guess: meshoptimizer's own error bound, else 10% of the input
+    if method == "meshopt":
+        Fw, w_vertex, _, _ = _wedges(prep)
+        raw_n = len(simplify_meshopt.simplify(prep.V[w_vertex], Fw, 0, target_error=e_abs, absolute_error=True)[0])
+        n = max(raw_n, 4)
+    else:
+        n = max(T0 // 10, 4)
+    lo, hi = 0, None  # lo: largest count known to fail; hi: smallest known to pass
+    for _ in range(9):
+        out, h = probe(n)
+        if h.max <= e_abs and _defects(out) == 0:
+            hi = n if hi is None else min(hi, n)
+        else:
+            lo = max(lo, n)
+        if hi is not None and hi <= lo * 1.05 + 1:
+            break
+        if hi is None:
+            if n >= T0:
+                break
+            # error falls roughly like 1 / count on smooth surfaces
+            n = int(min(T0, max(n * 1.25, n * (h.max / e_abs) * 1.1)))
+        elif lo == 0:
+            n = int(max(4, n * max(0.25, min(0.8, (h.max / e_abs) * 0.9))))
+        else:
+            n = int(np.sqrt(lo * hi))
+        if n in tried:
+            break
+    if hi is None:
+        best_n = max(tried, key=lambda k: (tried[k][1].max <= e_abs and _defects(tried[k][0]) == 0, k))
+    else:
+        best_n = hi
+    out, h = tried[best_n]
+    return best_n, out, h
+
+
+def stage(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord]:
+    """Pipeline entry point: ``(scene, SimplifyConfig) -> (scene, record)``."""
+    try:
+        return simplify_mesh(scene, cfg)
+    except MemoryError:
+        raise StageError("simplify ran out of memory") from None

@@ -196,7 +196,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config key (repeatable), e.g. --set bsp.enabled=true")
         sp.add_argument("--quiet", action="store_true", help="print nothing but errors")
-        sp.add_argument("--debug", action="store_true", help="show Python tracebacks")
+        # SUPPRESS: when absent here, `bake --debug run ...` (the top-level flag) still counts
+        sp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                        help="show Python tracebacks")
 
     r = sub.add_parser("run", help="bake a model file or a config")
     r.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")

@@ -1,0 +1,273 @@
+"""Convex polygon fragments and robust, vectorised splitting by planes.
+
+The BSP builder never works on triangle fans after a split: a fragment is a convex polygon (the
+piece of one *source face* that lies in a cell), kept as a polygon until the very end, where it is
+fanned into ``k - 2`` triangles. Cutting a polygon adds at most one corner per piece, so a cut
+costs +2 triangles (+1 through a corner, 0 along a diagonal), never +4 as for two fan triangles.
+A source face is one input triangle, or several coplanar input triangles merged into one convex
+polygon (``merge.py``).
+
+Storage is padded: ``pos[f, :count[f]]`` are the corners in order and the slots after them repeat
+corner 0, so ``min``/``max`` over the corner axis and the fan area formula need no masks. Each
+corner carries its attributes (UV, vertex colour: interpolated linearly along cut edges) and the
+index of the scene vertex it is (``-1`` for a vertex made by a cut).
+
+Coordinates are *normalised* (centred on the bbox centre, divided by the bbox diagonal), so every
+tolerance is a fraction of the scene size and nothing depends on where the scene sits or its size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SplitResult:
+    """Fragment ids after classifying (and cutting) a batch of fragments, each by its own plane.
+    ``owner`` arrays give, for each id, the position of the plane/node it was classified by."""
+
+    front: np.ndarray
+    front_owner: np.ndarray
+    back: np.ndarray
+    back_owner: np.ndarray
+    on: np.ndarray  # coplanar fragments
+    on_owner: np.ndarray
+    on_side: np.ndarray  # 0: seen from the front (normal along the plane's), 1: from the back, 2: both
+    splits: int  # fragments cut in two
+    kept_whole: int  # straddling fragments not cut because a piece would be below min area
+
+
+class FaceStore:
+    """An append-only set of convex fragments of source faces.
+
+    ``src_plane[s]`` is source face s's exact plane (unit normal, offset; normal 0 when the face is
+    degenerate), ``src_two_sided[s]`` whether it is visible from both sides."""
+
+    def __init__(self, pos: np.ndarray, count: np.ndarray, attr: np.ndarray, vid: np.ndarray,
+                 src_plane: np.ndarray, src_degenerate: np.ndarray, src_two_sided: np.ndarray):
+        S, K = pos.shape[:2]
+        self.K = K
+        self.A = attr.shape[2]
+        cap = max(16, int(S * 2))
+        self.pos = np.zeros((cap, K, 3))
+        self.attr = np.zeros((cap, K, self.A))
+        self.vid = np.full((cap, K), -1, np.int64)
+        self.count = np.zeros(cap, np.int64)
+        self.src = np.zeros(cap, np.int64)
+        self.whole = np.zeros(cap, bool)
+        self.n = 0
+        self.src_plane = np.asarray(src_plane, np.float64)
+        self.src_degenerate = np.asarray(src_degenerate, bool)
+        self.src_two_sided = np.asarray(src_two_sided, bool)
+        k = np.arange(K)[None, :] < np.asarray(count)[:, None]
+        # a point of each source plane shared by all its fragments (so they share one plane)
+        self.src_center = (pos * k[..., None]).sum(1) / np.maximum(np.asarray(count), 1)[:, None]
+        self.append(pos, attr, vid, count, np.arange(S), whole=True)
+
+    # ------------------------------------------------------------------ storage
+    def _grow(self, need_n: int, need_k: int) -> None:
+        if need_k > self.K:
+            extra = need_k - self.K
+            self.pos = np.concatenate([self.pos, np.repeat(self.pos[:, :1], extra, 1)], 1)
+            self.attr = np.concatenate([self.attr, np.repeat(self.attr[:, :1], extra, 1)], 1)
+            self.vid = np.concatenate([self.vid, np.repeat(self.vid[:, :1], extra, 1)], 1)
+            self.K = need_k
+        cap = len(self.count)
+        if need_n > cap:
+            extra = max(need_n, int(cap * 1.6)) - cap
+            self.pos = np.concatenate([self.pos, np.zeros((extra, self.K, 3))])
+            self.attr = np.concatenate([self.attr, np.zeros((extra, self.K, self.A))])
+            self.vid = np.concatenate([self.vid, np.full((extra, self.K), -1, np.int64)])
+            self.count = np.concatenate([self.count, np.zeros(extra, np.int64)])
+            self.src = np.concatenate([self.src, np.zeros(extra, np.int64)])
+            self.whole = np.concatenate([self.whole, np.zeros(extra, bool)])
+
+    def append(self, pos, attr, vid, count, src, whole: bool = False) -> np.ndarray:
+        m, k = pos.shape[:2]
+        if m == 0:
+            return np.zeros(0, np.int64)
+        self._grow(self.n + m, k)
+        if k < self.K:  # pad with corner 0
+            pad = self.K - k
+            pos = np.concatenate([pos, np.repeat(pos[:, :1], pad, 1)], 1)
+            attr = np.concatenate([attr, np.repeat(attr[:, :1], pad, 1)], 1)
+            vid = np.concatenate([vid, np.repeat(vid[:, :1], pad, 1)], 1)
+        sl = slice(self.n, self.n + m)
+        self.pos[sl] = pos
+        self.attr[sl] = attr
+        self.vid[sl] = vid
+        self.count[sl] = count
+        self.src[sl] = src
+        self.whole[sl] = whole
+        idx = np.arange(self.n, self.n + m)
+        self.n += m
+        return idx
+
+    # ------------------------------------------------------------------ queries
+    def planes_of(self, idx: np.ndarray) -> np.ndarray:
+        return self.src_plane[self.src[idx]]
+
+    def degenerate_of(self, idx: np.ndarray) -> np.ndarray:
+        return self.src_degenerate[self.src[idx]]
+
+    def two_sided_of(self, idx: np.ndarray) -> np.ndarray:
+        return self.src_two_sided[self.src[idx]]
+
+    def area_of(self, idx: np.ndarray) -> np.ndarray:
+        return polygon_area(self.pos[idx])
+
+    def triangles_of(self, idx: np.ndarray) -> np.ndarray:
+        return self.count[idx] - 2
+
+
+def polygon_area(pos: np.ndarray) -> np.ndarray:
+    """Area of padded convex polygons ``(m, K, 3)`` (padding repeats corner 0)."""
+    if pos.shape[1] < 3 or len(pos) == 0:
+        return np.zeros(len(pos))
+    e = pos[:, 1:] - pos[:, :1]
+    cr = np.cross(e[:, :-1], e[:, 1:]).sum(1)
+    return 0.5 * np.linalg.norm(cr, axis=1)
+
+
+def distances(pos: np.ndarray, planes: np.ndarray, eps: float) -> np.ndarray:
+    """``(m, K)`` distances of each fragment's corners to its own plane ``planes[i]``, with
+    corners within ``eps`` snapped to 0."""
+    d = np.einsum("mkc,mc->mk", pos, planes[:, :3]) - planes[:, 3:4]
+    d[np.abs(d) <= eps] = 0.0
+    return d
+
+
+def classify(d: np.ndarray, degenerate: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Side of each fragment from its snapped corner distances: 0 front, 1 back, 2 on,
+    3 straddling. Degenerate fragments are never cut: they take the side of their centroid."""
+    mn, mx = d.min(1), d.max(1)
+    lab = np.full(len(d), 3, np.int8)
+    lab[(mn >= 0) & (mx > 0)] = 0
+    lab[(mx <= 0) & (mn < 0)] = 1
+    lab[(mn == 0) & (mx == 0)] = 2
+    ds = degenerate & (lab == 3)
+    if ds.any():
+        k = np.arange(d.shape[1])[None, :] < count[:, None]
+        mean = (d * k).sum(1) / count
+        lab[ds] = np.where(mean[ds] >= 0, 0, 1)
+    return lab
+
+
+def split_faces(store: FaceStore, idx: np.ndarray, planes: np.ndarray, owner: np.ndarray, eps: float,
+                min_area: float) -> SplitResult:
+    """Classify fragments ``idx`` (fragment ``idx[i]`` against ``planes[owner[i]]``) and cut the
+    ones that straddle their plane.
+
+    A corner within ``eps`` of the plane counts as on it (snapped), so a cut through a vertex gives
+    two pieces and no sliver. A straddling fragment is kept whole (on the side holding more of its
+    area) when one piece would be smaller than ``min_area``.
+    """
+    idx = np.asarray(idx, np.int64)
+    owner = np.asarray(owner, np.int64)
+    pl = planes[owner]
+    d = distances(store.pos[idx], pl, eps)
+    lab = classify(d, store.degenerate_of(idx), store.count[idx])
+
+    on = lab == 2
+    fn = store.planes_of(idx[on])[:, :3]
+    aligned = np.einsum("ij,ij->i", fn, pl[on, :3]) >= 0
+    side = np.where(aligned, 0, 1).astype(np.int8)
+    side[store.two_sided_of(idx[on])] = 2
+
+    f_ids, f_own = [idx[lab == 0]], [owner[lab == 0]]
+    b_ids, b_own = [idx[lab == 1]], [owner[lab == 1]]
+    splits = kept = 0
+    s = np.flatnonzero(lab == 3)
+    if len(s):
+        fi, fo, bi, bo, splits, kept = _cut(store, idx[s], owner[s], d[s], min_area)
+        f_ids.append(fi)
+        f_own.append(fo)
+        b_ids.append(bi)
+        b_own.append(bo)
+    return SplitResult(np.concatenate(f_ids), np.concatenate(f_own), np.concatenate(b_ids),
+                       np.concatenate(b_own), idx[on], owner[on], side, splits, kept)
+
+
+def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, min_area: float):
+    m = len(idx)
+    K = store.K
+    P, A, Vd = store.pos[idx], store.attr[idx], store.vid[idx]
+    cnt = store.count[idx]
+    k = np.arange(K)[None, :]
+    valid = k < cnt[:, None]
+    nxt = (k + 1) % cnt[:, None]
+    d1 = np.take_along_axis(d, nxt, axis=1)
+    cross = valid & (d * d1 < 0)
+    # the new corner is computed from the positive corner towards the negative one, so two
+    # fragments sharing the edge make bit-identical vertices (no crack, exact weld)
+    pos_first = d > 0
+    ia = np.where(pos_first, k, nxt)
+    ib = np.where(pos_first, nxt, k)
+    da = np.take_along_axis(d, ia, axis=1)
+    db = np.take_along_axis(d, ib, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(cross, da / (da - db), 0.0)
+    t = t[..., None]
+    Pa, Pb = np.take_along_axis(P, ia[..., None], 1), np.take_along_axis(P, ib[..., None], 1)
+    Aa, Ab = np.take_along_axis(A, ia[..., None], 1), np.take_along_axis(A, ib[..., None], 1)
+    Pi = Pa + t * (Pb - Pa)
+    Ai = Aa + t * (Ab - Aa)
+
+    candP = np.stack([P, Pi], axis=2).reshape(m, 2 * K, 3)
+    candA = np.stack([A, Ai], axis=2).reshape(m, 2 * K, store.A)
+    candV = np.stack([Vd, np.full_like(Vd, -1)], axis=2).reshape(m, 2 * K)
+    keep_f = np.stack([valid & (d >= 0), cross], axis=2).reshape(m, 2 * K)
+    keep_b = np.stack([valid & (d <= 0), cross], axis=2).reshape(m, 2 * K)
+    fP, fA, fV, fc = _compact(candP, candA, candV, keep_f)
+    bP, bA, bV, bc = _compact(candP, candA, candV, keep_b)
+    fa, ba = polygon_area(fP), polygon_area(bP)
+    ok = (fa >= min_area) & (ba >= min_area)
+    whole_front = ~ok & (fa >= ba)
+    whole_back = ~ok & (fa < ba)
+    src = store.src[idx]
+    nf = store.append(fP[ok], fA[ok], fV[ok], fc[ok], src[ok])
+    nb = store.append(bP[ok], bA[ok], bV[ok], bc[ok], src[ok])
+    front = np.concatenate([idx[whole_front], nf])
+    front_o = np.concatenate([owner[whole_front], owner[ok]])
+    back = np.concatenate([idx[whole_back], nb])
+    back_o = np.concatenate([owner[whole_back], owner[ok]])
+    return front, front_o, back, back_o, int(ok.sum()), int((~ok).sum())
+
+
+def _compact(P, A, V, keep):
+    """Move kept slots to the front of each row; pad with the row's first corner."""
+    cnt = keep.sum(1)
+    order = np.argsort(~keep, axis=1, kind="stable")
+    kmax = max(3, int(cnt.max())) if len(cnt) else 3
+    order = order[:, :kmax]
+    slot = np.arange(kmax)[None, :]
+    order = np.where(slot < cnt[:, None], order, order[:, :1])
+    return (np.take_along_axis(P, order[..., None], 1), np.take_along_axis(A, order[..., None], 1),
+            np.take_along_axis(V, order, 1), cnt)
+
+
+def triangle_store(tri_pos: np.ndarray, min_area: float, *, attr: np.ndarray | None = None,
+                   vid: np.ndarray | None = None, two_sided: np.ndarray | None = None) -> FaceStore:
+    """A store whose source faces are single triangles ``(T, 3, 3)`` (normalised coordinates)."""
+    T = len(tri_pos)
+    plane, degen = face_planes(tri_pos, np.full(T, 3), min_area)
+    return FaceStore(tri_pos, np.full(T, 3), np.zeros((T, 3, 0)) if attr is None else attr,
+                     np.full((T, 3), -1, np.int64) if vid is None else vid, plane, degen,
+                     np.zeros(T, bool) if two_sided is None else two_sided)
+
+
+def face_planes(pos: np.ndarray, count: np.ndarray, min_area: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact planes (unit normal, offset through the centroid) of padded convex polygons, and
+    which are degenerate (area <= min_area; normal 0)."""
+    e = pos[:, 1:] - pos[:, :1]
+    cr = np.cross(e[:, :-1], e[:, 1:]).sum(1) if pos.shape[1] >= 3 else np.zeros((len(pos), 3))
+    ln = np.linalg.norm(cr, axis=1)
+    degen = 0.5 * ln <= min_area
+    nrm = np.zeros_like(cr)
+    ok = ~degen
+    nrm[ok] = cr[ok] / ln[ok, None]
+    k = np.arange(pos.shape[1])[None, :] < count[:, None]
+    cen = (pos * k[..., None]).sum(1) / count[:, None]
+    return np.concatenate([nrm, np.einsum("ij,ij->i", nrm, cen)[:, None]], 1), degen

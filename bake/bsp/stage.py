@@ -1,0 +1,265 @@
+"""The ``bsp`` stage: build the tree, replace the scene's triangles by the split, reordered set,
+and add the ``bsp nodes`` / ``bsp planes`` lists (docs/formats-bsp.md).
+
+The stage works in normalised coordinates (bbox centre at the origin, bbox diagonal 1), so the
+tree — split counts, plane choices, draw order — does not depend on where the scene sits or how
+big it is; only the written planes are in world units.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+import numpy as np
+
+from ..record import StageRecord
+from ..scene import Scene, ScratchList
+from .build import BuildOptions, Tree, build_tree
+from .encode import Encoded, encode
+from .merge import SourceFaces, merge_coplanar
+from .split import FaceStore, face_planes
+
+NODES_LIST = "bsp nodes"
+PLANES_LIST = "bsp planes"
+# a list entry in project.json: "<20-char id>":["<name>",[items]],  (as bake/export/lists.py)
+LIST_ENTRY_OVERHEAD = 28
+
+
+def options(cfg: Any) -> BuildOptions:
+    """Build options from the ``[bsp]`` config section (fields it lacks keep their defaults)."""
+    opt = BuildOptions()
+    for name in BuildOptions.__dataclass_fields__:
+        if hasattr(cfg, name):
+            setattr(opt, name, getattr(cfg, name))
+    return opt
+
+
+def frame(scene: Scene) -> tuple[np.ndarray, float]:
+    """Centre and size that map the scene to normalised coordinates."""
+    b = scene.bounds()
+    return 0.5 * (b[0] + b[1]), scene.scale()
+
+
+def _attributes(scene: Scene) -> tuple[np.ndarray, dict[str, slice]]:
+    """Per-corner attributes (T, 3, A) interpolated along cuts: UVs, lightmap UVs and vertex
+    colours, whichever the scene has; and where each sits in the last axis."""
+    T = scene.n_triangles
+    parts, layout, at = [], {}, 0
+    for name, arr in (("uv", scene.tri_uvs), ("lightmap_uv", scene.tri_lightmap_uvs),
+                      ("vertex_color", None if scene.vertex_colors is None else scene.vertex_colors[scene.triangles])):
+        if arr is not None:
+            parts.append(arr)
+            layout[name] = slice(at, at + arr.shape[2])
+            at += arr.shape[2]
+    attr = np.concatenate(parts, axis=2) if parts else np.zeros((T, 3, 0))
+    return attr, layout
+
+
+def _groups(scene: Scene, two_sided: np.ndarray) -> np.ndarray:
+    """Faces may merge only within a group: same material, sidedness, face colour and albedo."""
+    cols = [scene.tri_material.astype(np.float64)[:, None], two_sided.astype(np.float64)[:, None]]
+    for per_face in (scene.face_colors, scene.face_albedo):
+        if per_face is not None:
+            cols.append(per_face)
+    _, g = np.unique(np.concatenate(cols, axis=1), axis=0, return_inverse=True)
+    return g.ravel()
+
+
+def build(scene: Scene, opt: BuildOptions, merge: bool = True):
+    """Everything but writing the scene: (store, sources, tree, encoded, frame)."""
+    center, scale = frame(scene)
+    pos_n = (scene.positions - center) / scale
+    tris = scene.triangles
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    attr, layout = _attributes(scene)
+    seen = np.ones((len(tris), attr.shape[2]), bool)
+    if "uv" in layout:  # an untextured material shows no UVs: they need not agree to merge
+        textured = np.array([m.texture is not None or m.texture_data is not None for m in scene.materials], bool)
+        seen[:, layout["uv"]] = textured[np.clip(scene.tri_material, 0, len(textured) - 1)][:, None]
+    src = merge_coplanar(pos_n, tris, attr, _groups(scene, two), opt.epsilon, opt.min_area, enabled=merge,
+                         seen=seen)
+    plane, degen = face_planes(src.pos, src.count, opt.min_area)
+    first_tri = src.tri_list[src.tri_start[:-1]]
+    store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
+    tree = build_tree(store, opt, center, scale)
+    frag_tris = fragment_triangles(store, src)
+    enc = encode(tree, frag_tris)
+    return store, src, tree, enc, (center, scale)
+
+
+def fragment_triangles(store: FaceStore, src: SourceFaces) -> np.ndarray:
+    """Triangles each fragment is written as: its source's own triangles if it was never cut,
+    else a fan of its corners."""
+    n = store.n
+    per_src = np.diff(src.tri_start)
+    out = store.count[:n] - 2
+    w = store.whole[:n]
+    out[w] = per_src[store.src[:n][w]]
+    return out
+
+
+def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, center: np.ndarray,
+                scale: float) -> tuple[Scene, dict]:
+    """The scene with its triangles replaced by the fragments, in the encoded order."""
+    order = enc.frag_order
+    ntri = enc.frag_tris
+    T_out = int(ntri.sum())
+    slot = np.zeros(len(order) + 1, np.int64)
+    np.cumsum(ntri, out=slot[1:])
+    _, layout = _attributes(scene)
+    A = store.A
+    V = scene.n_vertices
+    uv_s, lm_s, vc_s = layout.get("uv"), layout.get("lightmap_uv"), layout.get("vertex_color")
+
+    out_tris = np.zeros((T_out, 3), np.int64)
+    out_uv = np.zeros((T_out, 3, 2)) if uv_s else None
+    out_lm = np.zeros((T_out, 3, 2)) if lm_s else None
+    out_src_tri = np.zeros(T_out, np.int64)  # the scene triangle whose material/colour it keeps
+    out_face = np.repeat(store.src[order], ntri)  # the source face (merged polygon) it comes from
+    out_poly = np.full(T_out, -1, np.int64)
+    tri_polygon = scene.tri_polygon if scene.tri_polygon is not None else np.arange(scene.n_triangles)
+
+    whole = store.whole[order]
+    # ---- fragments never cut: their source's own triangles, untouched
+    wf = np.flatnonzero(whole)
+    if len(wf):
+        s = store.src[order[wf]]
+        cnt = np.diff(src.tri_start)[s]
+        rep = np.repeat(np.arange(len(wf)), cnt)
+        within = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        t_src = src.tri_list[src.tri_start[s][rep] + within]
+        dst = slot[wf][rep] + within
+        out_tris[dst] = scene.triangles[t_src]
+        if uv_s:
+            out_uv[dst] = scene.tri_uvs[t_src]
+        if lm_s:
+            out_lm[dst] = scene.tri_lightmap_uvs[t_src]
+        out_src_tri[dst] = t_src
+        out_poly[dst] = tri_polygon[t_src]
+    # ---- cut fragments: fans over their corners
+    cf = np.flatnonzero(~whole)
+    new_pos = np.zeros((0, 3))
+    new_vc = np.zeros((0, 4))
+    n_new = 0
+    if len(cf):
+        f = order[cf]
+        c = store.count[f]
+        k = c - 2
+        rep = np.repeat(np.arange(len(cf)), k)
+        i = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + 1  # fan: (0, i, i + 1)
+        fr = f[rep]
+        corners = np.stack([np.zeros_like(i), i, i + 1], 1)
+        vid = store.vid[fr[:, None], corners]
+        cpos = store.pos[fr[:, None], corners]
+        cattr = store.attr[fr[:, None], corners] if A else np.zeros(corners.shape + (0,))
+        need = vid < 0
+        if need.any():
+            vcols = cattr[need][:, vc_s] if vc_s else np.zeros((int(need.sum()), 0))
+            key = np.concatenate([cpos[need], vcols], 1)
+            uniq, inv = np.unique(key, axis=0, return_inverse=True)
+            vid = vid.copy()
+            vid[need] = V + inv.ravel()
+            new_pos = uniq[:, :3] * scale + center
+            new_vc = uniq[:, 3:]
+            n_new = len(uniq)
+        dst = slot[cf][rep] + (i - 1)
+        out_tris[dst] = vid
+        if uv_s:
+            out_uv[dst] = cattr[..., uv_s]
+        if lm_s:
+            out_lm[dst] = cattr[..., lm_s]
+        t_src = src.tri_list[src.tri_start[store.src[fr]]]
+        out_src_tri[dst] = t_src
+    positions = np.concatenate([scene.positions, new_pos]) if n_new else scene.positions
+    vcol = scene.vertex_colors
+    if vcol is not None and n_new:
+        vcol = np.concatenate([vcol, np.clip(new_vc, 0.0, 1.0)])
+    new = scene.replace(
+        positions=positions,
+        triangles=out_tris,
+        tri_material=scene.tri_material[out_src_tri].copy(),
+        tri_uvs=out_uv,
+        tri_polygon=out_poly,
+        vertex_colors=vcol,
+        face_colors=None if scene.face_colors is None else scene.face_colors[out_src_tri].copy(),
+        face_albedo=None if scene.face_albedo is None else scene.face_albedo[out_src_tri].copy(),
+        tri_lightmap_uvs=out_lm,
+    )
+    in_face = np.zeros(scene.n_triangles, np.int64)
+    in_face[src.tri_list] = np.repeat(np.arange(len(src.count)), np.diff(src.tri_start))
+    return new, {"new_vertices": n_new, "source_triangle": out_src_tri, "source_face": out_face,
+                 "input_source_face": in_face}
+
+
+def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tuple[int, int]:
+    """(items, project.json bytes) of a list written as short JSON numbers."""
+    from ..export.numbers import format_numbers, json_array
+
+    items = format_numbers(np.asarray(values), decimals, name=name)
+    return len(items), len(json.dumps(name)) + len(json_array(items)) + LIST_ENTRY_OVERHEAD
+
+
+def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
+    t0 = time.perf_counter()
+    rec = StageRecord("bsp")
+    T_in = scene.n_triangles
+    opt = options(cfg)
+    merge = bool(getattr(cfg, "merge_coplanar", True))
+    if T_in == 0:
+        new = scene.with_list(ScratchList(NODES_LIST, np.zeros(0, np.int64), 0, _NODES_DOC, "int"))
+        new = new.with_list(ScratchList(PLANES_LIST, np.zeros(0), 4, _PLANES_DOC, "number"))
+        new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": 2,
+                                        "epsilon": opt.epsilon})
+        rec.warn("no triangles: empty BSP")
+        rec.seconds = time.perf_counter() - t0
+        return new, rec
+    store, src, tree, enc, (center, scale) = build(scene, opt, merge)
+    new, info = write_scene(scene, store, src, enc, center, scale)
+    nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
+    planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
+    new = new.with_list(ScratchList(NODES_LIST, enc.nodes.copy(), 0, _NODES_DOC, "int"))
+    new = new.with_list(ScratchList(PLANES_LIST, enc.planes.ravel().copy(), 4, _PLANES_DOC, "number"))
+    stack_bound = 2 * enc.max_depth + 2
+    new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": stack_bound,
+                                    "epsilon": opt.epsilon,
+                                    "source_triangle": info["source_triangle"],
+                                    "source_face": info["source_face"],
+                                    "input_source_face": info["input_source_face"]})
+    T_out = new.n_triangles
+    st = tree.stats
+    records = sum(enc.records.values())
+    rec.counts_in = {"triangles": T_in, "vertices": scene.n_vertices}
+    rec.counts_out = {"triangles": T_out, "vertices": new.n_vertices, "bsp_records": records,
+                      "bsp_planes": len(enc.planes), "bsp_items": nodes_items + planes_items}
+    rec.accuracy = {"inflation": T_out / T_in - 1.0}
+    rec.details = {
+        "inflation": round(T_out / T_in - 1.0, 6),
+        "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
+        "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),
+        "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
+        "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],
+        "new_vertices": info["new_vertices"],
+        "lists": {NODES_LIST: {"items": nodes_items, "project_json_bytes": nodes_bytes},
+                  PLANES_LIST: {"items": planes_items, "project_json_bytes": planes_bytes}},
+        "bytes_per_record": round((nodes_bytes + planes_bytes) / max(1, records), 3),
+        "bytes_per_triangle": round((nodes_bytes + planes_bytes) / max(1, T_out), 3),
+        "items_per_triangle": round((nodes_items + planes_items) / max(1, T_out), 4),
+        "seconds": {"build": round(st["seconds"], 4), "leaf_tests": round(st["leaf_seconds"], 4),
+                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
+        "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
+    }
+    if st["kept_whole"]:
+        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been "
+                 f"below the minimum area ({opt.min_area:g} of diagonal^2)")
+    rec.seconds = time.perf_counter() - t0
+    return new, rec
+
+
+_NODES_DOC = ("BSP records (0 leaf: first, n; 1 peel: first, np, ns; >=2 split: plane+1, back, first, "
+              "nA, nB; <=-2: with two-sided nD) — docs/formats-bsp.md")
+_PLANES_DOC = "a, b, c, d per BSP plane (eye in front when a*x + b*y + c*z - d >= 0)"
+
+__all__ = ["stage", "build", "write_scene", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]

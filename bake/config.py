@@ -617,6 +617,10 @@ def validate(cfg: Config) -> None:
     need(0 < cfg.bsp.epsilon < 1e-2, "bsp.epsilon", "must be > 0 and < 0.01")
     need(0 <= cfg.bsp.min_area < 1e-4, "bsp.min_area", "must be >= 0 and < 1e-4")
     need(2 <= cfg.bsp.plane_decimals <= 12, "bsp.plane_decimals", "must be between 2 and 12")
+    need(0.87 * 10.0 ** -cfg.bsp.plane_decimals < cfg.bsp.epsilon, "bsp.plane_decimals",
+         f"rounding normals to {cfg.bsp.plane_decimals} decimals tilts planes by up to "
+         f"{0.87 * 10.0 ** -cfg.bsp.plane_decimals:.2g}, more than bsp.epsilon = {cfg.bsp.epsilon:g}; "
+         "raise one of them")
     need(cfg.bsp.split_weight >= 0 and cfg.bsp.balance_weight >= 0, "bsp.split_weight",
          "weights must be >= 0")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")

@@ -193,11 +193,14 @@ def test_empty_and_single_triangle_scenes():
 def test_config_keys_reach_the_builder():
     from bake.bsp.stage import options
 
-    cfg = config.load(None, ["bsp.leaves='convex'", "bsp.leaf_max=7", "bsp.epsilon=1e-7", "bsp.candidates=0"])
+    cfg = config.load(None, ["bsp.leaves='convex'", "bsp.leaf_max=7", "bsp.epsilon=1e-7", "bsp.candidates=0",
+                             "bsp.plane_decimals=8"])
     opt = options(cfg.bsp)
-    assert (opt.leaves, opt.leaf_max, opt.epsilon, opt.candidates) == ("convex", 7, 1e-7, 0)
+    assert (opt.leaves, opt.leaf_max, opt.epsilon, opt.candidates, opt.plane_decimals) == ("convex", 7, 1e-7, 0, 8)
     with pytest.raises(config.ConfigError):
         config.load(None, ["bsp.epsilon=0.5"])
+    with pytest.raises(config.ConfigError, match="plane_decimals"):
+        config.load(None, ["bsp.epsilon=1e-7"])  # 6-decimal normals tilt planes by more than that
     with pytest.raises(config.ConfigError):
         config.load(None, ["bsp.leaves='some'"])
 

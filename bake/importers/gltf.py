@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import ImportJob
 from ..record import StageRecord
-from ..scene import DEFAULT_MATERIAL, Light, Material, Scene, SourceInfo
+from ..scene import DEFAULT_MATERIAL, MAX_COORDINATE, Light, Material, Scene, SourceInfo
 from ..textures.colors import linear_to_srgb
 from .gltf_data import MESHOPT_EXTENSIONS, GltfDocument, decode_draco, open_document
 
@@ -468,7 +468,8 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
     any_col = any_uv = False
     for ni, world in instances:
         mi = nodes[ni]["mesh"]
-        det = float(np.linalg.det(world[:3, :3]))
+        with np.errstate(all="ignore"):  # only its sign is used; a huge scale may overflow it
+            det = float(np.linalg.det(world[:3, :3]))
         for pi, prim in enumerate(meshes[mi]["primitives"]):
             mode = prim.get("mode", 4)
             mode_counts[MODE_NAMES[mode]] = mode_counts.get(MODE_NAMES[mode], 0) + 1
@@ -486,6 +487,10 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
             if not np.isfinite(pos).all():
                 raise doc.error(f"nodes[{ni}] transform makes positions of "
                                 f"meshes[{mi}].primitives[{pi}] overflow to Inf")
+            if len(pos) and float(np.abs(pos).max()) > MAX_COORDINATE:
+                raise doc.error(f"positions of meshes[{mi}].primitives[{pi}] placed by nodes[{ni}] reach "
+                                f"{float(np.abs(pos).max()):.3g}, beyond +-{MAX_COORDINATE:g} (the range "
+                                f"bake supports)")
             tris = p.tris[:, [0, 2, 1]] if det < 0 else p.tris
             parts_pos.append(pos)
             parts_tri.append(tris + offset)

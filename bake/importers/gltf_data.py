@@ -566,7 +566,12 @@ class GltfDocument:
                 head = uri[5:].partition(",")[0]
                 return ImageRef(data=self._data_uri(uri, w), mime=mime or head.split(";")[0])
             p = self.resolve_uri(uri, w)
-            if not p.is_file():
+            try:
+                found = p.is_file()
+            except OSError as e:  # e.g. a name longer than the file system allows
+                shown = uri if len(uri) <= 80 else uri[:77] + "..."
+                raise self.error(f"uri '{shown}' cannot be used: {e.strerror}", w) from None
+            if not found:
                 return ImageRef(path=p, mime=mime, missing=True)
             self._remember(p)
             return ImageRef(path=p, mime=mime)

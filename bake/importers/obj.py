@@ -27,7 +27,8 @@ Rules (what this importer decides, so the report and tests can rely on it):
 * ``vt u [v [w]]``: ``v`` defaults to 0, ``w`` is ignored; OBJ convention kept (v up).
   ``vn`` lines are counted, not parsed (normals are recomputed downstream).
 * Positions, colours and texture coordinates must be finite: NaN/Inf (including MSVC's
-  ``1.#IND``/``1.#INF``) is an :class:`InputError` naming the first few lines. A malformed
+  ``1.#IND``/``1.#INF``) is an :class:`InputError` naming the first few lines, as is a position
+  beyond ``scene.MAX_COORDINATE`` (1e30). A malformed
   number on a ``v``/``vt``/``f`` line is an :class:`InputError` naming file and line.
 * Faces: index 0, an index out of range (positive indices may refer to vertices defined later
   in the file; negative ones count back from the line) or fewer than 3 corners make a bad face:
@@ -43,7 +44,10 @@ Rules (what this importer decides, so the report and tests can rely on it):
   keeps the one default material.
 * ``mtllib``: one or more files relative to the OBJ (a name with spaces is tried whole first);
   backslashes are accepted; a missing file falls back to the same base name next to the OBJ,
-  then to a case-insensitive match; still missing: a warning and default colours.
+  then to a case-insensitive match; still missing: a warning and default colours. Like glTF
+  URIs, MTL and texture files must lie in the OBJ's folder (or below it): a path that leaves it
+  (``..``, absolute, a symbolic link pointing out) is not read (a warning; the same base name next
+  to the OBJ is still tried).
 * MTL: ``newmtl`` (rest of the line, trimmed), ``Kd`` (rgb; one value = grey; ``spectral``/``xyz``
   forms are ignored with a warning; clipped to [0, 1]), ``d`` (alpha, ``-halo`` skipped) and
   ``Tr`` (alpha = 1 - Tr, used only when the material has no ``d``). ``Tr 1`` would make the
@@ -76,7 +80,7 @@ import numpy as np
 from ..config import ImportJob
 from ..errors import InputError
 from ..record import StageRecord
-from ..scene import DEFAULT_MATERIAL, Material, Scene, SourceInfo
+from ..scene import DEFAULT_MATERIAL, MAX_COORDINATE, Material, Scene, SourceInfo
 
 __all__ = ["load"]
 
@@ -197,6 +201,10 @@ class _Tokens:
             bs = np.flatnonzero(arr[:-2] == 92)
             c1 = bs[arr[bs + 1] == nlb]
             c2 = bs[(arr[bs + 1] == 13) & (arr[bs + 2] == 10)] if nlb == 10 else bs[:0]
+            # a backslash at the very end of the file continues nothing: the newline after it is
+            # the one appended above, which must stay (else the last line has no terminator)
+            end = len(data) - 2
+            c1, c2 = c1[c1 + 1 < end], c2[c2 + 2 < end]
             if len(c1) or len(c2):
                 ws = ws.copy()
                 nlmask = nlmask.copy()
@@ -376,6 +384,11 @@ class _Parser:
         used[has_col, 3:6] = True
         used[has_a, 6] = True
         self._nonfinite((~np.isfinite(rows) & used).any(axis=1), lines, "vertex values")
+        huge = (np.abs(rows[:, :3]) > MAX_COORDINATE).any(axis=1)
+        if huge.any():
+            ln = self.t.line_no[lines[huge]]
+            raise self.err(f"vertex coordinates beyond +-{MAX_COORDINATE:g} (the range bake supports) on "
+                           f"{int(huge.sum())} line(s): {_lines_list(ln)}", int(ln[0]))
         pos = np.ascontiguousarray(rows[:, :3], dtype=np.float64)
         colors = None
         if has_col.any():
@@ -668,18 +681,24 @@ class _Parser:
             if not text:
                 self.rec.warn(f"{self.path}:{ln}: 'mtllib' without a file name")
                 continue
-            found = _find_file(base, text)
-            cands = [(text, found)] if found else [(n, _find_file(base, n)) for n in text.split()]
-            for name, p in cands:
+            whole: list[Path] = []
+            found = _find_file(base, text, outside=whole)
+            cands = [(text, found, whole)] if found or len(text.split()) == 1 else []
+            for n in ([] if cands else text.split()):
+                outside: list[Path] = []
+                cands.append((n, _find_file(base, n, outside=outside), outside or whole))
+            for name, p, outside in cands:
                 if p is None:
-                    self.rec.warn(f"material library not found: '{name}' ({self.path}:{ln}); "
+                    why = (f"outside the model's folder ({outside[0]}), not read" if outside else
+                           "not found")
+                    self.rec.warn(f"material library {why}: '{name}' ({self.path}:{ln}); "
                                   f"default colours used")
                     continue
                 if p in seen:
                     continue
                 seen.add(p)
                 self.files.append(p)
-                for nm, m in _parse_mtl(p, self.rec).items():
+                for nm, m in _parse_mtl(p, self.rec, root=base).items():
                     if nm in mats:
                         self.rec.warn(f"material '{nm}' is defined again in {p}; the first "
                                       f"definition is kept")
@@ -688,29 +707,53 @@ class _Parser:
         return mats
 
 
-def _find_file(base: Path, name: str) -> Path | None:
+def _is_file(p: Path) -> bool:
+    """``Path.is_file`` that is False, not an exception, for names the OS refuses (too long...)."""
+    try:
+        return p.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _inside(path: Path, root: Path) -> bool:
+    """``path`` (symbolic links followed) lies in ``root`` or below it."""
+    try:
+        return Path(os.path.realpath(path)).is_relative_to(os.path.realpath(root))
+    except (OSError, ValueError):
+        return False
+
+
+def _find_file(base: Path, name: str, root: Path | None = None,
+               outside: list[Path] | None = None) -> Path | None:
     """Find ``name`` (relative to ``base``, backslashes accepted): as written, then its base name
-    next to ``base``, then a case-insensitive match there."""
+    next to ``base``, then a case-insensitive match there. Only files inside ``root`` (the OBJ's
+    folder; default ``base``) count, as for glTF URIs: a path that leaves it (``..``, absolute, a
+    symbolic link pointing out) is not read, and is appended to ``outside`` when it exists."""
     name = name.strip().strip('"').replace("\\", "/")
     if not name:
         return None
+    root = base if root is None else root
     p = Path(name)
     cands = [p if p.is_absolute() else base / p, base / p.name]
     for c in cands:
-        if c.is_file():
-            return Path(os.path.normpath(c))
+        if _is_file(c):
+            if _inside(c, root):
+                return Path(os.path.normpath(c))
+            if outside is not None:
+                outside.append(Path(os.path.normpath(c)))
     low = p.name.lower()
     try:
         for entry in sorted(os.listdir(base)):
-            if entry.lower() == low and (base / entry).is_file():
+            if entry.lower() == low and _is_file(base / entry) and _inside(base / entry, root):
                 return Path(os.path.normpath(base / entry))
     except OSError:
         pass
     return None
 
 
-def _parse_mtl(path: Path, rec: StageRecord) -> dict[str, Material]:
-    """Read one MTL file: newmtl, Kd, d, Tr, map_Kd (see the module docstring)."""
+def _parse_mtl(path: Path, rec: StageRecord, root: Path | None = None) -> dict[str, Material]:
+    """Read one MTL file: newmtl, Kd, d, Tr, map_Kd (see the module docstring). Textures must lie
+    in ``root`` (the OBJ's folder; default the MTL's)."""
     try:
         raw = path.read_bytes()
     except OSError as e:
@@ -827,9 +870,11 @@ def _parse_mtl(path: Path, rec: StageRecord) -> dict[str, Material]:
             if not fname:
                 rec.warn(f"{path}:{ln}: 'map_Kd' without a file name in '{name}'")
             else:
-                tex = _find_file(base, fname)
+                outside: list[Path] = []
+                tex = _find_file(base, fname, root=root or base, outside=outside)
                 if tex is None:
-                    rec.warn(f"texture not found: '{fname}' (material '{name}', {path}:{ln}); "
+                    why = f"outside the model's folder ({outside[0]}), not read" if outside else "not found"
+                    rec.warn(f"texture {why}: '{fname}' (material '{name}', {path}:{ln}); "
                              f"material colour used")
         out[name] = Material(name=name, color=(r, g, b, float(a)), texture=tex)
     if latin1:

@@ -112,12 +112,14 @@ def apply_affine(points: np.ndarray, A: np.ndarray, t: np.ndarray) -> np.ndarray
     A = np.asarray(A, np.float64)
     t = np.asarray(t, np.float64)
     out = np.empty_like(p)
-    for r in range(3):
-        col = out[:, r]
-        col[...] = t[r]
-        for c in range(3):
-            if A[r, c] != 0.0:
-                col += A[r, c] * p[:, c]
+    # a scale that overflows gives Inf here, quietly: the pipeline then names the key (exit 2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for r in range(3):
+            col = out[:, r]
+            col[...] = t[r]
+            for c in range(3):
+                if A[r, c] != 0.0:
+                    col += A[r, c] * p[:, c]
     return out.reshape(shape)
 
 

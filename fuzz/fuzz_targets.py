@@ -101,13 +101,9 @@ TARGETS: dict[str, Callable[..., Any]] = {"obj": read_obj, "gltf": read_gltf, "s
 # text in its message, and the corpus file that reproduces it. ``make fuzz`` steps over them so a
 # session is not stopped by what is already known; the regression test marks those files xfail
 # (strict), so it fails once the bug is fixed and the entry is due for removal.
-KNOWN_BUGS: dict[str, list[tuple[str, str, str]]] = {
-    "sb3": [
-        ("error", "while decompressing data", "crash-zlib-error.sb3"),  # zlib.error escapes read_archive
-        ("NotImplementedError", "zip file version", "crash-zip-version.sb3"),  # escapes _open_zip
-        ("IndexError", "string index out of range", "crash-empty-entry-name.sb3"),  # ZipInfo.is_dir()
-    ],
-}
+# (The three .sb3 crashes fuzzing found — zlib.error, NotImplementedError, IndexError escaping
+# read_archive — are fixed; their inputs stay in fuzz/corpus/sb3 as regressions.)
+KNOWN_BUGS: dict[str, list[tuple[str, str, str]]] = {}
 
 
 def is_known(target: str, exc: BaseException) -> bool:

@@ -26,7 +26,9 @@ import io
 import json
 import math
 import re
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -372,12 +374,18 @@ def validate_sprite(sprite: Any, assets: dict[str, bytes] | None = None) -> list
 _S_IFMT, _S_IFLNK = 0o170000, 0o120000
 
 
+# Everything zipfile/zlib raise on malformed archives (fuzzing found zlib.error for a corrupt
+# deflate stream, NotImplementedError for a bad version field, IndexError for an empty name).
+_ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError, NotImplementedError,
+               IndexError, RuntimeError, struct.error, UnicodeDecodeError)
+
+
 def _open_zip(source: Path | bytes, path: Path | None) -> zipfile.ZipFile:
     try:
         if isinstance(source, (bytes, bytearray, memoryview)):
             return zipfile.ZipFile(io.BytesIO(bytes(source)))
         return zipfile.ZipFile(source)
-    except (zipfile.BadZipFile, OSError, ValueError) as e:
+    except _ZIP_ERRORS as e:
         raise InputError(f"not a Scratch project archive (zip): {e}", path=path) from None
 
 
@@ -393,7 +401,15 @@ def read_archive(source: Path | str | bytes, *, max_entries: int = MAX_ENTRIES,
     larger than their header says, and corrupt data. Sizes are checked against the headers
     before anything is decompressed, and again while reading."""
     path = None if isinstance(source, (bytes, bytearray, memoryview)) else Path(source)
-    zf = _open_zip(path if path is not None else source, path)
+    try:
+        return _read_archive(_open_zip(path if path is not None else source, path), path, max_entries,
+                             max_total, max_entry, max_ratio)
+    except _ZIP_ERRORS as e:  # anything the checks below did not name
+        raise InputError(f"archive cannot be read: {type(e).__name__}: {e}", path=path) from None
+
+
+def _read_archive(zf: zipfile.ZipFile, path: Path | None, max_entries: int, max_total: int,
+                  max_entry: int, max_ratio: float) -> dict[str, bytes]:
     with zf:
         infos = zf.infolist()
         if len(infos) > max_entries:
@@ -431,7 +447,7 @@ def read_archive(source: Path | str | bytes, *, max_entries: int = MAX_ENTRIES,
             try:
                 with zf.open(info) as f:
                     data = f.read(info.file_size + 1)
-            except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, ValueError, EOFError) as e:
+            except _ZIP_ERRORS as e:
                 raise InputError(f"archive entry {info.filename!r} cannot be read: {e}", path=path) from None
             if len(data) > info.file_size:  # the header lied about the size
                 raise InputError(f"archive entry {info.filename!r} is larger than its header says", path=path)
@@ -591,7 +607,7 @@ def merge_into(project: Path | str | bytes, target_name: str, lists: dict[str, l
         entries = {"project.json": data}
         key = "project.json"
     else:
-        entries = read_archive(data)
+        entries = read_archive(path if path is not None else data)  # errors name the file
         key = _find_json(entries, "project.json", path)
     prefix = key[: -len("project.json")]
     proj = _json_entry(entries, key, path)

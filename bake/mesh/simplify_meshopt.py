@@ -85,7 +85,10 @@ def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int
         raise RuntimeError("meshoptimizer is not installed")
     P = ctypes.POINTER
     idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
-    pos = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+    p64 = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p64):  # centred before the float32 cast: a small model far from the origin keeps its digits
+        p64 = p64 - 0.5 * (p64.min(axis=0) + p64.max(axis=0))
+    pos = np.ascontiguousarray(p64, dtype=np.float32)
     if len(pos) and not np.isfinite(pos).all():
         raise ValueError("positions do not fit in float32")
     dst = np.empty(max(len(idx), 3), dtype=np.uint32)

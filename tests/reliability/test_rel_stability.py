@@ -462,10 +462,7 @@ CASES = [
     StageCase("simplify", lambda: solid_scene(12), check_simplify,
               lambda s: {"mesh": {"simplify": {"enabled": True, "target_ratio": 0.25, "measure_error": False,
                                                "refine_rounds": 0}}},
-              _stage_in_pipeline("simplify"), xfail={"all_at_once": (
-                  "bug report: simplify (meshopt) casts world positions to float32 without centring them; "
-                  "float32 spacing at 1e5 (0.008) is the size of this 0.0074-wide model, so the collapses "
-                  "are chosen on noise")}),
+              _stage_in_pipeline("simplify")),  # meshopt gets positions centred before float32
     StageCase("bsp", lambda: solid_scene(10), check_bsp,
               lambda s: {"bsp": {"enabled": True, "gap_planes": False, "axis_planes": False}},
               _module("bake.bsp.stage")),

@@ -175,6 +175,24 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_check(args: argparse.Namespace) -> int:
+    from .export import check as check_mod
+
+    target = Path(args.target)
+    if not target.exists():
+        raise InputError("file not found", path=target)
+    rep = check_mod.check(target)
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        for line in check_mod.summary_lines(rep):
+            print(line)
+    if args.strict and any(not lim["ok"] for lim in rep["limits"]):
+        bad = [lim for lim in rep["limits"] if not lim["ok"]][0]
+        raise LimitError(f"limit exceeded: {bad['name']} = {bad['value']} > {bad['limit']}", path=target)
+    return 0
+
+
 def cmd_keys(args: argparse.Namespace) -> int:
     cfg = config_mod.Config()
     for key in config_mod.all_keys():
@@ -228,6 +246,13 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", help="output path without suffix (writes .json and .png)")
     common(sw)
     sw.set_defaults(func=cmd_sweep)
+
+    ck = sub.add_parser("check", help="where a project's bytes go: lists, blocks, assets against Scratch's limits")
+    ck.add_argument("target", help="an .sb3 (or a project.json)")
+    ck.add_argument("--json", action="store_true")
+    ck.add_argument("--strict", action="store_true", help="exit 4 if a limit is exceeded")
+    ck.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show Python tracebacks")
+    ck.set_defaults(func=cmd_check)
 
     k = sub.add_parser("keys", help="list every config key with its default")
     k.set_defaults(func=cmd_keys, set=[], quiet=False)

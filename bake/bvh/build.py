@@ -479,6 +479,16 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
             state["total"] += area_box(lo[i], hi[i]) - old
             i = P[i]
 
+    def settle(saved) -> bool:
+        """Keep a move that lowered the SAH; otherwise roll every touched node back from the
+        journal. True if the move was kept."""
+        if state["total"] >= saved[1] - 1e-12 * abs(saved[1]):
+            for j, (lj, rj, pj, loj, hij) in journal.items():
+                L[j], Rg[j], P[j], lo[j], hi[j] = lj, rj, pj, loj, hij
+            state["root"], state["total"] = saved
+            return False
+        return True
+
     def detach(n):
         """Take n out: its parent is freed and n's sibling takes the parent's place."""
         p = P[n]
@@ -570,13 +580,10 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
                 saved = (state["root"], state["total"])
                 p_free = detach(i)
                 attach(i, best_place(i), p_free)
-                if state["total"] >= saved[1] - 1e-12 * abs(saved[1]):
-                    for j, (lj, rj, pj, loj, hij) in journal.items():
-                        L[j], Rg[j], P[j], lo[j], hi[j] = lj, rj, pj, loj, hij
-                    state["root"], state["total"] = saved
-                    undone += 1
-                else:
+                if settle(saved):
                     moves += 1
+                else:
+                    undone += 1
                 journal = None
                 continue
             if i == root or P[i] < 0 or P[i] == root:
@@ -593,13 +600,10 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
                 a, b = b, a
             for orphan, free in ((a, p_free), (b, i)):
                 attach(orphan, best_place(orphan), free)
-            if state["total"] >= saved[1] - 1e-12 * abs(saved[1]):
-                for j, (lj, rj, pj, loj, hij) in journal.items():
-                    L[j], Rg[j], P[j], lo[j], hi[j] = lj, rj, pj, loj, hij
-                state["root"], state["total"] = saved
-                undone += 1
-            else:
+            if settle(saved):
                 moves += 1
+            else:
+                undone += 1
             journal = None
     out = BVH(lo=np.array(lo), hi=np.array(hi), left=np.array(L, np.int64),
               right=np.array(Rg, np.int64), first=bvh.first.copy(), count=bvh.count.copy(),

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernel import SALT_AO, Context, EffectStats, as32, drive
-from .sampling import cosine_directions, frames, mean_and_se, multi_jittered, point_shifts
+from .kernel import SALT_AO, Context, EffectStats, drive, hemisphere
+from .sampling import mean_and_se
 from .targets import Points
 
 
@@ -18,18 +18,12 @@ def ambient_occlusion(ctx: Context, pts: Points, samples: int, distance: float, 
     se = np.zeros(P)
     if P == 0:
         return out, se
-    pattern = multi_jittered(samples, ctx.seed, SALT_AO)
-    N = pattern.n
-    su, sv = point_shifts(pts.key, ctx.seed, SALT_AO)
-    t, b = frames(pts.nrm, sv)
-    n32, t32, b32 = as32(pts.nrm), as32(t), as32(b)
-    org = ctx.tracer.origins(pts.pos, pts.nrm)
-    su32 = su.astype(np.float32)
+    hemi = hemisphere(ctx, pts, samples, SALT_AO)
+    N = hemi.N
 
     def work(i0: int, i1: int, clock) -> None:
         with clock("generate"):
-            d, _ = cosine_directions(pattern, n32[i0:i1], t32[i0:i1], b32[i0:i1], su32[i0:i1])
-            o = np.repeat(org[i0:i1], N, axis=0)
+            o, d = hemi.rays(i0, i1)
         with clock("trace"):
             occ = ctx.tracer.occluded(o, d, distance)
         with clock("shade"):

@@ -22,8 +22,8 @@ from typing import Callable
 import numpy as np
 
 from .color import luminance
-from .kernel import SALT_BOUNCE, Context, EffectStats, as32, drive
-from .sampling import cosine_directions, frames, mean_and_se, multi_jittered, point_shifts
+from .kernel import SALT_BOUNCE, Context, EffectStats, drive, hemisphere
+from .sampling import mean_and_se
 from .targets import Points
 
 CACHE_RAYS = 1 << 24  # keep hit records for up to this many rays, else re-cast each iteration
@@ -36,13 +36,8 @@ class BounceRays:
         self.ctx = ctx
         self.pts = pts
         self.stats = stats
-        self.pattern = multi_jittered(samples, ctx.seed, SALT_BOUNCE)
-        self.N = self.pattern.n
-        su, sv = point_shifts(pts.key, ctx.seed, SALT_BOUNCE)
-        t, b = frames(pts.nrm, sv)
-        self.n32, self.t32, self.b32 = as32(pts.nrm), as32(t), as32(b)
-        self.su32 = su.astype(np.float32)
-        self.org = ctx.tracer.origins(pts.pos, pts.nrm)
+        self.hemi = hemisphere(ctx, pts, samples, SALT_BOUNCE)
+        self.N = self.hemi.N
         P = len(pts)
         self.cached = P * self.N <= CACHE_RAYS
         if self.cached:
@@ -55,9 +50,7 @@ class BounceRays:
     def _cast(self, i0: int, i1: int, clock) -> tuple[np.ndarray, ...]:
         N = self.N
         with clock("generate"):
-            d, _ = cosine_directions(self.pattern, self.n32[i0:i1], self.t32[i0:i1], self.b32[i0:i1],
-                                     self.su32[i0:i1])
-            o = np.repeat(self.org[i0:i1], N, axis=0)
+            o, d = self.hemi.rays(i0, i1)
         with clock("trace"):
             h = self.ctx.tracer.intersect(o, d, self.ctx.far)
         with clock("shade"):

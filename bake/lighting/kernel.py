@@ -10,6 +10,7 @@ from typing import Callable
 import numpy as np
 
 from .rays import Clock, Timers, Tracer, points_per_chunk
+from .sampling import cosine_directions, frames, multi_jittered, point_shifts
 
 # stream salts: each effect draws from its own random stream
 SALT_AO = 1
@@ -126,3 +127,36 @@ def drive(ctx: Context, stats: EffectStats, n_points: int, samples: int,
 
 def as32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
+
+
+@dataclass
+class Hemisphere:
+    """Cosine-weighted hemisphere rays for a set of points: one multi-jittered pattern shifted
+    per point (seeded by the effect's salt), tangent frames, and origins pushed off the surface.
+    Shared by AO, sky and bounces; ``rays(i0, i1)`` makes the rays of points ``i0 .. i1 - 1``."""
+
+    pattern: object
+    n32: np.ndarray
+    t32: np.ndarray
+    b32: np.ndarray
+    su32: np.ndarray
+    org: np.ndarray
+
+    @property
+    def N(self) -> int:
+        return self.pattern.n
+
+    def rays(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray]:
+        """(origins, directions) float32, ``N`` rays per point, point-major."""
+        d, _ = cosine_directions(self.pattern, self.n32[i0:i1], self.t32[i0:i1], self.b32[i0:i1],
+                                 self.su32[i0:i1])
+        return np.repeat(self.org[i0:i1], self.N, axis=0), d
+
+
+def hemisphere(ctx: "Context", pts, samples: int, salt: int) -> Hemisphere:
+    pattern = multi_jittered(samples, ctx.seed, salt)
+    su, sv = point_shifts(pts.key, ctx.seed, salt)
+    t, b = frames(pts.nrm, sv)
+    return Hemisphere(pattern, as32(pts.nrm), as32(t), as32(b), su.astype(np.float32),
+                      ctx.tracer.origins(pts.pos, pts.nrm))
+

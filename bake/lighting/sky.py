@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from .color import luminance
-from .kernel import SALT_SKY, Context, EffectStats, as32, drive
-from .sampling import cosine_directions, frames, mean_and_se, multi_jittered, point_shifts
+from .kernel import SALT_SKY, Context, EffectStats, drive, hemisphere
+from .sampling import mean_and_se
 from .targets import Points
 
 
@@ -22,13 +22,8 @@ def sky_light(ctx: Context, pts: Points, samples: int, zenith: np.ndarray, horiz
     if P == 0:
         return out, se
     zenith, horizon, ground = (np.asarray(c, np.float64) for c in (zenith, horizon, ground))
-    pattern = multi_jittered(samples, ctx.seed, SALT_SKY)
-    N = pattern.n
-    su, sv = point_shifts(pts.key, ctx.seed, SALT_SKY)
-    t, b = frames(pts.nrm, sv)
-    n32, t32, b32 = as32(pts.nrm), as32(t), as32(b)
-    org = ctx.tracer.origins(pts.pos, pts.nrm)
-    su32 = su.astype(np.float32)
+    hemi = hemisphere(ctx, pts, samples, SALT_SKY)
+    N = hemi.N
     lz, lh, lg = (float(luminance(c)) for c in (zenith, horizon, ground))
     span = max(lz, lh, lg)
     far = ctx.far
@@ -36,8 +31,7 @@ def sky_light(ctx: Context, pts: Points, samples: int, zenith: np.ndarray, horiz
     def work(i0: int, i1: int, clock) -> None:
         n = i1 - i0
         with clock("generate"):
-            d, _ = cosine_directions(pattern, n32[i0:i1], t32[i0:i1], b32[i0:i1], su32[i0:i1])
-            o = np.repeat(org[i0:i1], N, axis=0)
+            o, d = hemi.rays(i0, i1)
         with clock("trace"):
             occ = ctx.tracer.occluded(o, d, far)
         with clock("shade"):

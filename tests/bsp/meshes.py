@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from bake.scene import Material, Scene, make_scene
+from meshgen import merge
 
 REPO = Path(__file__).resolve().parents[2]
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
@@ -122,15 +123,6 @@ def box(lo, hi, inward: bool = False) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
-def concat(parts) -> tuple[np.ndarray, np.ndarray]:
-    vs, fs, off = [], [], 0
-    for v, f in parts:
-        vs.append(v)
-        fs.append(f + off)
-        off += len(v)
-    return np.concatenate(vs), np.concatenate(fs)
-
-
 def interlocked_scene(seed: int = 0) -> Scene:
     """Intersecting boxes, a cyclic 'pinwheel' of three sticks, and coplanar overlapping quads."""
     rng = np.random.default_rng(seed)
@@ -150,7 +142,7 @@ def interlocked_scene(seed: int = 0) -> Scene:
         parts.append((v, np.array([[0, 1, 2], [0, 2, 3]])))
         parts.append((v + [0.25, 0.25, 0], np.array([[0, 1, 2], [0, 2, 3]])))
         parts.append((v + [0.1, -0.2, 0], np.array([[0, 2, 1], [0, 3, 2]])))
-    v, f = concat(parts)
+    v, f = merge(*parts)
     return make_scene(v, f)
 
 
@@ -163,5 +155,5 @@ def rooms_scene() -> Scene:
     parts.append(box([7, 0, 3.9], [10, 3, 4.1]))
     parts.append(box([2, 0, 6], [2.5, 3, 6.5]))  # pillar
     parts.append(box([7.5, 0, 1.5], [8.5, 1.0, 2.5]))  # table
-    v, f = concat(parts)
+    v, f = merge(*parts)
     return make_scene(v, f)

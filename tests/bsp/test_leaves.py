@@ -7,7 +7,7 @@ import numpy as np
 from bake.bsp.build import BuildOptions, build_tree, hide_graph, peel, priority_peel
 from bake.bsp.split import triangle_store
 
-from .meshes import box, concat
+from .meshes import box, merge
 
 EPS = 1e-9
 
@@ -137,7 +137,7 @@ def test_convex_and_concave_sets_are_single_leaves_with_no_split():
 
 
 def test_separate_objects_need_no_split():
-    v, f = concat([box([0, 0, 0], [1, 1, 1]), box([3, 0, 0], [4, 1, 1]), box([0, 3, 0], [1, 4, 1])])
+    v, f = merge(box([0, 0, 0], [1, 1, 1]), box([3, 0, 0], [4, 1, 1]), box([0, 3, 0], [1, 4, 1]))
     st = triangle_store(_tris(v, f) / 10.0, 1e-12)
     tree = build_tree(st, BuildOptions())
     assert tree.stats["splits"] == 0

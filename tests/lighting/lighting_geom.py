@@ -7,6 +7,7 @@ import trimesh
 
 from bake.config import LightConfig, LightingConfig
 from bake.scene import Material, make_scene
+from meshgen import merge  # noqa: F401  (re-exported for the lighting tests)
 
 # (translation, scale) frames every analytic test runs in
 FRAMES = [(0.0, 1.0), (1e5, 1e-3)]
@@ -44,15 +45,6 @@ def box(n: int = 2, half: float = 1.0, inward: bool = False):
 def sphere(sub: int = 3, radius: float = 1.0, center=(0.0, 0.0, 0.0)):
     m = trimesh.creation.icosphere(subdivisions=sub, radius=radius)
     return np.asarray(m.vertices, float) + np.asarray(center, float), np.asarray(m.faces)
-
-
-def merge(*parts):
-    pos, tris, off = [], [], 0
-    for p, t in parts:
-        pos.append(p)
-        tris.append(t + off)
-        off += len(p)
-    return np.concatenate(pos), np.concatenate(tris)
 
 
 def scene(pos, tris, frame=(0.0, 1.0), color=(0.8, 0.8, 0.8, 1.0), tri_material=None, materials=None):

@@ -32,6 +32,7 @@ from bake.scene import make_scene
 from bake.lighting.lightmap import light_function
 from bake.textures import lightmap as lm
 from conftest import corpus_path
+from meshgen import merge
 
 SUN = np.array([-0.5, -1.0, 0.0])
 COS_SUN = 1.0 / np.sqrt(1.25)  # n . l for the ground and SUN
@@ -58,15 +59,6 @@ def box(lo, hi):
 def ground(half):
     v = np.array([[-half, 0, -half], [half, 0, -half], [half, 0, half], [-half, 0, half]], float)
     return v, np.array([[0, 2, 1], [0, 3, 2]])  # normal +y
-
-
-def merge(*parts):
-    vs, ts, off = [], [], 0
-    for v, t in parts:
-        vs.append(v)
-        ts.append(t + off)
-        off += len(v)
-    return np.concatenate(vs), np.concatenate(ts)
 
 
 def thick_room(wall=0.35, half=1.0, height=1.2):

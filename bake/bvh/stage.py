@@ -56,8 +56,9 @@ def prepare(scene: Scene, precision: int) -> tuple[np.ndarray, np.ndarray, int |
         keep = np.zeros(0, np.int64)
         mag = 0.0
     # boxes grow by this before rounding outward: far above float64 rounding of the slab test
-    # for origins within ~1e6 scene sizes, far below any triangle size that matters
-    pad = 1e-9 * (scale + mag)
+    # for origins within ~1e6 scene sizes, and above the 2e-9 x triangle size by which the inside
+    # test's tolerance (traverse.BARY_EPS) widens a triangle; far below any size that matters
+    pad = 4e-9 * (scale + mag)
     return tq, keep, d, pad
 
 

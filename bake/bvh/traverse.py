@@ -15,6 +15,10 @@ id list and stack reads; writes and local variables are free).
 
 Ray set-up (no list reads): ``inv = 1 / d`` per axis, or ``1e30`` when ``|d| < 1e-30``; the near
 plane of a box on an axis is its lo plane when ``inv >= 0``, else its hi plane.
+
+The triangle test (Möller-Trumbore, double-sided) accepts barycentrics within ``BARY_EPS`` = 1e-9
+of the triangle (``u >= -1e-9``, ``v >= -1e-9``, ``u + v <= 1.000000001``), so rays through shared
+edges and vertices of a closed mesh cannot slip between its triangles.
 """
 
 from __future__ import annotations
@@ -31,6 +35,15 @@ BIG_INV = 1e30
 # a hit counts only if det^2 > PARALLEL * |e1|^2 |d x e2|^2, i.e. the ray is not within about
 # 1e-6 radians of the triangle's plane (where float rounding can put the hit anywhere)
 PARALLEL = 1e-12
+# the inside test accepts barycentrics down to -BARY_EPS (u >= -eps, v >= -eps, u + v <= 1 + eps):
+# a ray through an edge or vertex shared by two triangles computes u = -1e-17 or so on *both*
+# sides and a plain test lets it through (docs/reliability.md item 4). 1e-13 already closed every
+# leak measured (icospheres up to 1e6 from the origin), so 1e-9 has a wide margin; it grows a
+# triangle by 1e-9 of its heights (far below the list grid), and a duplicate hit on the neighbour
+# is harmless to a closest-hit search. In Scratch it changes only typed-in numbers (no blocks).
+BARY_EPS = 1e-9
+BARY_LO = -BARY_EPS  # -1e-09
+BARY_HI = 1 + BARY_EPS  # 1.000000001 (exactly the double a typed-in 1.000000001 gives)
 
 
 @dataclass
@@ -111,13 +124,13 @@ def _tri_one(rd, tris, slot1, o, best, tmin):
     inv = 1 / det
     sx, sy, sz = o[0] - v0x, o[1] - v0y, o[2] - v0z
     u = (sx * px + sy * py + sz * pz) * inv
-    if u < 0 or u > 1:
+    if u < BARY_LO or u > BARY_HI:
         return
     qx = sy * e1z - sz * e1y
     qy = sz * e1x - sx * e1z
     qz = sx * e1y - sy * e1x
     v = (dx * qx + dy * qy + dz * qz) * inv
-    if v < 0 or u + v > 1:
+    if v < BARY_LO or u + v > BARY_HI:
         return
     t = (e2x * qx + e2y * qy + e2z * qz) * inv
     if t > tmin and t < best[0]:
@@ -288,12 +301,12 @@ class _Batch:
             inv = 1 / np.where(ok, det, 1.0)
             sx, sy, sz = o[:, 0] - v0x, o[:, 1] - v0y, o[:, 2] - v0z
             u = (sx * px + sy * py + sz * pz) * inv
-            ok &= (u >= 0) & (u <= 1)
+            ok &= (u >= BARY_LO) & (u <= BARY_HI)
             qx = sy * e1z - sz * e1y
             qy = sz * e1x - sx * e1z
             qz = sx * e1y - sy * e1x
             v = (dx * qx + dy * qy + dz * qz) * inv
-            ok &= (v >= 0) & (u + v <= 1)
+            ok &= (v >= BARY_LO) & (u + v <= BARY_HI)
             t = (e2x * qx + e2y * qy + e2z * qz) * inv
         ok &= (t > self.tmin) & (t < self.t[idx])
         w = idx[ok]
@@ -507,12 +520,12 @@ def brute_force(tri: np.ndarray, origins, directions, tmin: float = 0.0, tmax: f
                 sy = oo[..., 1] - V0[..., 1]
                 sz = oo[..., 2] - V0[..., 2]
                 u = (sx * px + sy * py + sz * pz) * inv
-                ok &= (u >= 0) & (u <= 1)
+                ok &= (u >= BARY_LO) & (u <= BARY_HI)
                 qx = sy * E1[..., 2] - sz * E1[..., 1]
                 qy = sz * E1[..., 0] - sx * E1[..., 2]
                 qz = sx * E1[..., 1] - sy * E1[..., 0]
                 v = (dx * qx + dy * qy + dz * qz) * inv
-                ok &= (v >= 0) & (u + v <= 1)
+                ok &= (v >= BARY_LO) & (u + v <= BARY_HI)
                 t = (E2[..., 0] * qx + E2[..., 1] * qy + E2[..., 2] * qz) * inv
             ok &= t > tmin
             t = np.where(ok, t, np.inf)

@@ -66,6 +66,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..bvh.traverse import BARY_HI, BARY_LO
 from ..export import sb3
 from ..textures.textimage import ALPHABET, VOLUMES
 from . import blocks as B
@@ -504,7 +505,8 @@ def _bvh_blocks(r: _Reader) -> None:
     r.define("_bvh box at %s", ["p"], box_test(lambda k: item(add(B.arg("p"), sub(k, 1)), nodes)))
     r.define("_bvh box", [], box_test(lambda k: item(k, box)))
 
-    # Möller-Trumbore, double-sided, exactly the order of docs/formats-bvh.md
+    # Möller-Trumbore, double-sided, exactly the order of docs/formats-bvh.md; the inside test
+    # has the reference's tolerance (u >= -1e-09 ...: typed-in numbers, no extra blocks)
     kk = r.v("_tk")
     V = {}
     for ci in range(3):
@@ -539,12 +541,12 @@ def _bvh_blocks(r: _Reader) -> None:
             r.set("_syv", sub(o[1], V[(0, 1)])),
             r.set("_szv", sub(o[2], V[(0, 2)])),
             r.set("_u", mul(dot3(sv, pv), tinv)),
-            B.if_(and_(_ge(u, 0), _le(u, 1)), [
+            B.if_(and_(_ge(u, BARY_LO), _le(u, BARY_HI)), [
                 r.set("_qx", sub(mul(sv[1], e1[2]), mul(sv[2], e1[1]))),
                 r.set("_qy", sub(mul(sv[2], e1[0]), mul(sv[0], e1[2]))),
                 r.set("_qz", sub(mul(sv[0], e1[1]), mul(sv[1], e1[0]))),
                 r.set("_v", mul(dot3(d, qv), tinv)),
-                B.if_(and_(_ge(vv, 0), _le(add(u, vv), 1)), [
+                B.if_(and_(_ge(vv, BARY_LO), _le(add(u, vv), BARY_HI)), [
                     r.set("_t", mul(dot3(e2, qv), tinv)),
                     B.if_(and_(gt(t, 0), lt(t, best)), [
                         r.set("_best", t), r.set("_hit", B.arg("s")),

@@ -106,6 +106,30 @@ def test_teapot_against_brute_force_and_embree(corpus, layout):
     assert np.allclose(tl[h.slot[hit]], sc.triangle_vertices()[h.tri[hit] - 1], atol=1e-5 * sc.scale())
 
 
+# a ray (x, y, -1) + t (0, 0, 1) at the triangle (0,0,0) (1,0,0) (0,1,0) has u = x, v = y: rays
+# 5e-10 outside an edge (in barycentric units) hit, rays 2e-9 outside miss (docs/formats-bvh.md)
+TOLERANCE_RAYS = {(0.25, 0.25): True, (0.0, 0.0): True, (-5e-10, 0.5): True, (0.5, -5e-10): True,
+                  (0.5, 0.5 + 5e-10): True, (-5e-10, -5e-10): True, (-2e-9, 0.5): False, (0.5, -2e-9): False,
+                  (0.5, 0.5 + 2e-9): False, (-2e-9, -2e-9): False}
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_inside_test_has_a_1e_9_tolerance(layout):
+    """The barycentric tolerance that keeps rays from slipping through shared edges: the same in
+    trace_one, trace and brute force (the Scratch reader: tests/scratch/test_scratch_readers.py)."""
+    sc = make_scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]))
+    enc, _ = baked(sc, layout)
+    o = np.array([[x, y, -1.0] for x, y in TOLERANCE_RAYS])
+    d = np.tile([0.0, 0.0, 1.0], (len(o), 1))
+    h = trace(enc, o, d)
+    assert h.hit.tolist() == list(TOLERANCE_RAYS.values())
+    assert np.all(h.t[h.hit] == 1.0)
+    bt, _, _, _ = brute_force(enc.tris.reshape(-1, 3, 3), o, d)
+    assert np.array_equal(h.t, bt)
+    for i in range(len(o)):
+        assert trace_one(enc, o[i], d[i])[:5] == (h.t[i], h.slot[i], h.tri[i], h.u[i], h.v[i])
+
+
 def test_tmax_and_tmin_limit_hits():
     enc, _ = baked(soup(200, seed=2), "quantised")
     tl = enc.tris.reshape(-1, 3, 3)

@@ -133,6 +133,41 @@ def test_bvh_query_matches_the_python_traversal_bit_for_bit(baked, k):
     assert _check_rays(case, case["vm_sprite"]["runs"][1:], case["rays"][:4]) >= 0
 
 
+# (x, y): hit? for the ray (x, y, -1) + t (0, 0, 1) at the triangle (0,0,0) (1,0,0) (0,1,0), where
+# u = x, v = y: 5e-10 outside an edge hits, 2e-9 outside misses (as tests/bvh/test_traverse.py)
+TOLERANCE_RAYS = {(0.25, 0.25): True, (0.0, 0.0): True, (-5e-10, 0.5): True, (0.5, -5e-10): True,
+                  (0.5, 0.5 + 5e-10): True, (-5e-10, -5e-10): True, (-2e-9, 0.5): False, (0.5, -2e-9): False,
+                  (0.5, 0.5 + 2e-9): False, (-2e-9, -2e-9): False}
+
+
+def test_bvh_triangle_test_tolerance_in_the_vm(vm, tmp_path):  # noqa: F811
+    """The reader's typed-in tolerance (-1e-09, 1.000000001) is the reference's, bit for bit:
+    rays just inside and just outside the widened triangle, every layout."""
+    from bake.bvh import stage as bvh_stage
+    from bake.config import BVHConfig
+    from bake.scene import make_scene
+
+    sc = make_scene(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]))
+    rs = [([x, y, -1.0], [0.0, 0.0, 1.0]) for x, y in TOLERANCE_RAYS]
+    jobs, encs = [], []
+    for layout in ("binary", "wide4", "quantised"):
+        out, _ = bvh_stage.stage(sc, BVHConfig(enabled=True, layout=layout))
+        enc = out.artefacts["bvh"]["encoded"]
+        lists = {"bvh nodes": enc.nodes.tolist(), "bvh tris": enc.tris.tolist(), "bvh tri ids": enc.ids.tolist()}
+        spec = readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(layout=layout, bits=enc.bits), textimage=False)
+        sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
+        data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
+        path = tmp_path / f"tol-{layout}.sb3"
+        path.write_bytes(data)
+        jobs.append({"load": str(path), "runs": [call("Mesh", "bvh ray %s %s %s %s %s %s", *o, *d,
+                                                      variables=["hit tri", "hit t", "hit u", "hit v", "hit slot"])
+                                                 for o, d in rs]})
+        encs.append(enc)
+    for enc, res in zip(encs, vm({"jobs": jobs})["jobs"]):
+        hits = _check_rays({"enc": enc}, res["runs"], rs)
+        assert hits == sum(TOLERANCE_RAYS.values())
+
+
 # --------------------------------------------------------------------------- renderer
 def _render_jobs(tmp, case, jobs):
     """Suzanne with a random colour per triangle (so a pixel's colour names its triangle), with and

@@ -22,8 +22,8 @@ holds. The checks are numpy over dense ``(m, n, 3)`` blocks of all polygons with
 * **sliver**: the fan is valid but one of its triangles has ~zero area (corner 0 collinear with
   two consecutive corners, e.g. a rectangle with edge midpoints, or a repeated corner) while the
   polygon itself has area. The clean stage would drop that triangle and the polygon would stop
-  being whole (``tri_polygon = -1``); earcut does not cut zero-area ears, so it keeps all
-  ``n - 2`` triangles proper (a repeated corner is dropped instead, see below).
+  being whole (``tri_polygon = -1``); earcut's triangles are made proper (see below), so all
+  ``n - 2`` triangles are kept (a repeated corner is dropped instead, see below).
 
 Degenerate polygons (all fan triangles of ~zero area: repeated or collinear corners) are
 fanned and left for the clean stage to drop.
@@ -36,6 +36,15 @@ self-intersecting polygon the normal of the least-squares plane). Earcut's trian
 so each one's normal agrees with ``n``. The only Python loop is over the polygons that need the
 fallback.
 
+Collinear corners after a rotation (docs/reliability.md item 5): corners on a straight edge are
+collinear in the projection only up to rounding, and earcut then cuts ears of ~zero area there
+(a rotated comb: 20 of 40 rotations), which clean would drop. Every earcut triangle with area at
+most ``EAR_TOLERANCE * L^2`` is repaired by flipping its long edge with the triangle across it,
+when both new triangles are proper (``_flip_degenerate``: numpy over all such triangles at once,
+a few rounds). Rarely a corner rounds to *exactly* collinear and earcut drops it, returning fewer
+than ``n - 2`` triangles; that polygon is earcut again in a few turned in-plane frames and the
+first whole, proper result is kept (``earcut_turned``).
+
 Guarantees (tested): every triangle uses corners of its own polygon; for every planar polygon
 the triangles' areas add up to the polygon's area and no triangle's normal points against the
 polygon's normal (and they cover it exactly once); for a non-planar one the same holds for the
@@ -47,7 +56,10 @@ largest smallest triangle along the Newell normal — and the record counts it i
 ``earcut_short_used_fan`` (``earcut_dropped_corners`` says how many corners earcut would have
 dropped); degenerate fan triangles are then dropped and counted by the clean stage. So
 triangles = sum(n - 2) over polygons with 3 or more corners. Polygons with fewer than 3 corners
-give no triangle (counted and warned).
+give no triangle (counted and warned). A simple polygon whose corners are collinear only up to
+rounding (any rotation of one with corners on its edges) gets no triangle of area at most
+``EAR_TOLERANCE * L^2`` (tests/mesh/test_triangulate_collinear.py: 200 rotations each of combs,
+Ls and stars with corners on their edges).
 """
 
 from __future__ import annotations
@@ -79,6 +91,11 @@ FLIP_TOLERANCE = 1e-10
 DEGENERATE_TOLERANCE = 1e-12
 # ... as is one below this fraction of scale^2 (clean's default area tolerance drops it anyway).
 SCENE_AREA_TOLERANCE = 1e-14
+# An earcut triangle whose area is at most EAR_TOLERANCE * L^2 (L as above, measured in the plane
+# projection) is an ear cut at corners that are collinear up to rounding; it is repaired by an
+# edge flip (see _flip_degenerate). 1e-10: a hundred times the sliver tolerance of the fan check,
+# so no repaired triangle comes near it, and still far below any triangle a model means to have.
+EAR_TOLERANCE = 1e-10
 # Polygons are analysed in dense blocks of at most this many corners (memory ~100 bytes a corner).
 _BLOCK_CORNERS = 1 << 21
 
@@ -321,27 +338,182 @@ def _project(points: np.ndarray, cp: np.ndarray, starts: np.ndarray, counts: np.
     return np.stack([_dot(q, u[cp]), _dot(q, v[cp])], axis=1)
 
 
-def _earcut_runs(xy: np.ndarray, starts: np.ndarray, counts: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Earcut each run of ``xy``; triangles as indices into ``xy``, oriented counter-clockwise."""
+class _Earcut(NamedTuple):
+    tris: np.ndarray  # (T, 3) indices into xy, counter-clockwise
+    run: np.ndarray  # (T,) run (polygon) of each triangle
+    flips: np.ndarray  # (R,) edge flips made in each run (_flip_degenerate)
+    turned: np.ndarray  # (R,) bool, earcut was short and was run again in a turned frame
+
+
+# In-plane turns (radians) tried, in order, when earcut drops corners of a polygon (rare).
+_RETRY_TURNS = (0.5, 1.3, 2.2)
+
+
+def _earcut_runs(xy: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> _Earcut:
+    """Earcut each run of ``xy``; triangles as indices into ``xy``, oriented counter-clockwise.
+
+    Two repairs keep earcut's output whole where corners are collinear only up to rounding (a
+    rotated straight edge):
+
+    * earcut cuts ears of ~zero area at such corners: they are removed by edge flips
+      (``_flip_degenerate``);
+    * earcut drops a corner whose projection rounds to *exactly* collinear with its neighbours
+      (sometimes after using it in other ears, leaving a zero-area gap) and returns fewer than
+      ``n - 2`` triangles: the run is earcut again with its plane coordinates turned by a few
+      fixed angles (``_RETRY_TURNS``), which rounds the corners differently; the first complete
+      result is kept and its coordinates are the ones ``xy`` holds for that run from then on (a
+      turn keeps lengths and areas, so all tolerances stay valid). A repeated corner or a
+      zero-width spike of a folded polygon is dropped in every frame: the run stays short and
+      the caller keeps a fan for it.
+    """
     if _earcut is None:  # pragma: no cover
         raise RuntimeError("mapbox_earcut is not installed")
+    R = len(starts)
+    flips = np.zeros(R, np.int64)
+    turned = np.zeros(R, bool)
+    if not R:
+        return _Earcut(np.zeros((0, 3), np.int64), np.zeros(0, np.int64), flips, turned)
+    d = xy - xy[starts][np.repeat(np.arange(R), counts)]
+    r2 = np.maximum.reduceat(_dot2(d, d), starts)  # L^2: largest squared distance from corner 0
+    limit = 2.0 * EAR_TOLERANCE * r2  # doubled area at or below which a triangle is degenerate
     tris, which = [], []
-    for k in range(len(starts)):  # the fallback loop: one earcut call per polygon
+    copied = False
+    for k in range(R):  # the fallback loop: one earcut call per polygon
         s, n = int(starts[k]), int(counts[k])
-        t = _earcut.triangulate_float64(np.ascontiguousarray(xy[s:s + n]), np.array([n], np.uint32))
-        tris.append(np.asarray(t, np.int64).reshape(-1, 3) + s)
-        which.append(np.full(len(tris[-1]), k, np.int64))
-    if not tris:
-        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    t = np.concatenate(tris)
+        t = _earcut_one(xy[s:s + n])
+        if len(t) < n - 2:  # rare: earcut dropped corners
+            t, turn, flips[k] = _earcut_turned(xy[s:s + n], t, limit[k:k + 1])
+            if turn is not None:
+                if not copied:
+                    xy, copied = xy.copy(), True
+                xy[s:s + n] = turn
+                turned[k] = True
+        tris.append(t + s)
+        which.append(np.full(len(t), k, np.int64))
+    t = _orient(xy, np.concatenate(tris))
     w = np.concatenate(which)
     if len(t):
-        a, b, c = xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]
-        cr = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        swap = cr < 0  # mapbox-earcut 2.x already returns counter-clockwise triangles; be sure
+        t, more = _flip_degenerate(xy, t, w, limit)
+        flips += more
+    return _Earcut(t, w, flips, turned)
+
+
+def _earcut_turned(xy: np.ndarray, t: np.ndarray, limit: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """Earcut one polygon again in turned frames; the first that gives ``n - 2`` triangles, all
+    proper after ``_flip_degenerate``, wins: (triangles, turned coordinates, flips). Otherwise
+    earcut's short result, ``None`` and 0."""
+    n = len(xy)
+    for a in _RETRY_TURNS:
+        turn = xy @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+        t2 = _earcut_one(turn)
+        if len(t2) != n - 2:
+            continue
+        t2, f = _flip_degenerate(turn, _orient(turn, t2), np.zeros(n - 2, np.int64), limit)
+        if (_cross2(turn, t2) > limit[0]).all():
+            return t2, turn, int(f[0])
+    return t, None, 0
+
+
+def _earcut_one(xy: np.ndarray) -> np.ndarray:
+    t = _earcut.triangulate_float64(np.ascontiguousarray(xy), np.array([len(xy)], np.uint32))
+    return np.asarray(t, np.int64).reshape(-1, 3)
+
+
+def _orient(xy: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``t`` with every triangle counter-clockwise in ``xy`` (mapbox-earcut 2.x already returns
+    counter-clockwise triangles; be sure)."""
+    t = t.copy()
+    if len(t):
+        swap = _cross2(xy, t) < 0
         t[swap] = t[swap][:, [0, 2, 1]]
-    return t, w
+    return t
+
+
+def _cross2(xy: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Twice the signed area of the 2-D triangles ``xy[t]`` (counter-clockwise positive)."""
+    a, b, c = xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+def _dot2(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+
+
+def _flip_degenerate(xy: np.ndarray, t: np.ndarray, w: np.ndarray, limit: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Repair earcut triangles of ~zero area by edge flips; returns the triangles and the number
+    of flips in each run.
+
+    ``t``: counter-clockwise triangles (indices into ``xy``), ``w``: run (polygon) of each,
+    ``limit``: per run, the doubled area at or below which a triangle is degenerate.
+
+    Earcut accepts an ear whose corners are collinear up to rounding (after a rotation, corners on
+    a straight line are no longer exactly collinear in the projection): a triangle ``(x, b, y)``
+    with ``b`` on its long edge ``x-y``. The triangle across that edge, ``(x, y, d)``
+    counter-clockwise, is proper, so the quad ``x b y d`` is convex at ``b`` and flipping the
+    diagonal gives ``(b, y, d)`` and ``(b, d, x)``: the same quad, the same count, the same signed
+    area. A flip is made only when both new triangles are proper (doubled area above ``limit``),
+    so it never makes a triangle degenerate or turns one against the normal, and every round
+    removes at least one degenerate triangle (the loop ends). A degenerate triangle whose
+    neighbour across the long edge is degenerate too waits for that one to be repaired first; one
+    with no neighbour there (a corner touching another edge) or whose flip would not give two
+    proper triangles (a repeated corner) is left as it is.
+
+    Vectorised: each round builds the undirected edge table of the polygons that have a
+    degenerate triangle and flips every candidate that shares no triangle with an earlier one.
+    """
+    t = t.copy()
+    flips = np.zeros(len(limit), np.int64)
+    n = np.int64(len(xy))
+    while True:
+        bad = _cross2(xy, t) <= limit[w]
+        if not bad.any():
+            break
+        affected = np.zeros(len(limit), bool)
+        affected[w[bad]] = True
+        sel = np.flatnonzero(affected[w])  # triangles of polygons with a degenerate triangle
+        ts, bs = t[sel], bad[sel]
+        lo = np.minimum(ts, np.roll(ts, -1, axis=1))  # edge k: corner k -> corner k + 1
+        hi = np.maximum(ts, np.roll(ts, -1, axis=1))
+        keys = (lo * n + hi).ravel()
+        order = np.argsort(keys, kind="stable")
+        skeys = keys[order]
+        bi = np.flatnonzero(bs)
+        tb = ts[bi]
+        e = xy[np.roll(tb, -1, axis=1)] - xy[tb]
+        k = np.argmax(_dot2(e, e), axis=1)  # the long edge
+        r = np.arange(len(bi))
+        x, y, b = tb[r, k], tb[r, (k + 1) % 3], tb[r, (k + 2) % 3]
+        key = np.minimum(x, y) * n + np.maximum(x, y)
+        left = np.searchsorted(skeys, key, "left")
+        ok = np.searchsorted(skeys, key, "right") - left == 2  # an inner edge of a manifold fan
+        left = np.minimum(left, len(skeys) - 2)
+        t1, t2 = order[left] // 3, order[left + 1] // 3
+        nb = np.where(t1 == bi, t2, t1)
+        ok &= (nb != bi) & ~bs[nb]
+        B = ts[nb]
+        other = (B != x[:, None]) & (B != y[:, None])
+        ok &= other.sum(axis=1) == 1
+        j = np.argmax(other, axis=1)
+        d, p, q = B[r, j], B[r, (j + 1) % 3], B[r, (j + 2) % 3]  # B = (p, q, d) counter-clockwise
+        new1 = np.stack([b, q, d], axis=1)
+        new2 = np.stack([b, d, p], axis=1)
+        lim = limit[w[sel[bi]]]
+        ok &= (_cross2(xy, new1) > lim) & (_cross2(xy, new2) > lim)
+        cand = np.flatnonzero(ok)
+        if not len(cand):
+            break
+        # each triangle in at most one flip a round: the first candidate that uses it wins
+        first = np.full(len(ts), len(cand), np.int64)
+        rank = np.arange(len(cand))
+        np.minimum.at(first, bi[cand], rank)
+        np.minimum.at(first, nb[cand], rank)
+        go = cand[(first[bi[cand]] == rank) & (first[nb[cand]] == rank)]
+        t[sel[bi[go]]] = new1[go]
+        t[sel[nb[go]]] = new2[go]
+        np.add.at(flips, w[sel[bi[go]]], 1)
+    return t, flips
 
 
 def earcut_polygon(points: np.ndarray, normal: np.ndarray | None = None) -> np.ndarray:
@@ -359,7 +531,7 @@ def earcut_polygon(points: np.ndarray, normal: np.ndarray | None = None) -> np.n
     starts = np.zeros(1, np.int64)
     counts = np.array([n], np.int64)
     xy = _project(pts, np.zeros(n, np.int64), starts, counts, np.asarray(normal, np.float64)[None])
-    return _earcut_runs(xy, starts, counts)[0]
+    return _earcut_runs(xy, starts, counts).tris
 
 
 def triangulate(positions: np.ndarray, sizes: np.ndarray, indices: np.ndarray, method: str = "auto",
@@ -389,6 +561,8 @@ def triangulate(positions: np.ndarray, sizes: np.ndarray, indices: np.ndarray, m
         "fallback_sliver": 0,
         "earcut_dropped_corners": 0,
         "earcut_short_used_fan": 0,
+        "earcut_flips": 0,
+        "earcut_turned": 0,
     }
     if method == "fan":
         corners, poly = fan_corners(sizes, off)
@@ -410,15 +584,19 @@ def triangulate(positions: np.ndarray, sizes: np.ndarray, indices: np.ndarray, m
         cp = np.repeat(np.arange(len(rows)), cnt)
         corner = off[rows][cp] + np.arange(int(cnt.sum())) - starts[cp]  # flat corner index
         xy = _project(positions[indices[corner]], cp, starts, cnt, an.normal[rows])
-        t, w = _earcut_runs(xy, starts, cnt)
+        ec = _earcut_runs(xy, starts, cnt)
+        t, w = ec.tris, ec.run
         got = np.bincount(w, minlength=len(rows))
         # earcut drops corners that repeat a neighbour or project to a zero-width spike (a
-        # non-planar polygon seen edge-on). Those polygons keep the fan instead, so every
+        # non-planar polygon seen edge-on) in every frame (exactly collinear corners of a rotated
+        # planar polygon are handled by _earcut_runs). Those polygons keep the fan instead, so every
         # polygon gives n - 2 triangles and no real surface is lost; degenerate fan triangles
         # are left for the clean stage to drop and count.
         short = got < cnt - 2
         stats["earcut_dropped_corners"] = int(((cnt - 2) - got)[short].sum())
         keep = ~short[w]
+        stats["earcut_flips"] = int(ec.flips[~short].sum())
+        stats["earcut_turned"] = int(ec.turned.sum())
         parts_c.append(corner[t[keep]])
         parts_p.append(rows[w[keep]])
         failed = rows[short]
@@ -482,6 +660,8 @@ def stage(scene: Scene, cfg: TriangulateConfig) -> tuple[Scene, StageRecord]:
         "nonplanar_polygons": st["nonplanar"],
         "earcut_dropped_corners": st["earcut_dropped_corners"],
         "earcut_short_used_fan": st["earcut_short_used_fan"],
+        "earcut_flips": st["earcut_flips"],
+        "earcut_turned": st["earcut_turned"],
         "nonplanar_tolerance": NONPLANAR_TOLERANCE,
     }
     rec.seconds = time.perf_counter() - t0

@@ -1,12 +1,16 @@
 """Wavefront OBJ (+ MTL) importer: our own vectorised parser; n-gons are kept as polygons.
 
-The whole file is read as bytes and tokenised once with numpy (no Python loop per vertex or
-face line): byte classes -> token spans -> the line of each token -> the keyword of each line.
+The file is read in blocks of whole lines (:data:`BLOCK_SIZE`, 4 MB; a line continued with a
+backslash stays in one block) and each block is tokenised with numpy (no Python loop per vertex
+or face line): byte classes -> token spans -> the line of each token -> the keyword of each line.
+Compact arrays per block (positions, UVs, resolved indices, materials) are concatenated at the
+end, so memory stays near the size of the result; line numbers, relative indices, ``usemtl``,
+errors and warnings are carried across blocks and come out exactly as for one block.
 ``v``/``vt`` numbers are converted in one call per directive kind; face corners (``v``,
 ``v/vt``, ``v//vn``, ``v/vt/vn``, mixed freely, negative = relative) are validated byte-wise,
 then converted in one call, with a sentinel for empty fields. Relative indices are resolved
-with the number of ``v``/``vt`` lines above each face line (searchsorted on line numbers), and
-materials by searchsorted over the ``usemtl`` lines. Only "other" lines (``usemtl``, ``mtllib``,
+with the number of ``v``/``vt`` lines above each face line (the count before the block plus a
+searchsorted on line numbers), and materials by searchsorted over the ``usemtl`` lines. Only "other" lines (``usemtl``, ``mtllib``,
 unknown directives) are visited one by one, and MTL files (small) are read line by line.
 
 Rules (what this importer decides, so the report and tests can rely on it):
@@ -100,6 +104,12 @@ _ABSENT_B = str(_ABSENT).encode()
 _WS_TO_SPACE = bytes.maketrans(bytes(range(33)), b" " * 33)
 _MSVC_SPECIAL = re.compile(rb"[+-]?\d*\.?\d*#(IND|INF|QNAN|SNAN)\d*", re.IGNORECASE)
 _FIRST_LINES = 5  # how many line numbers a message lists
+# bytes per parse block (whole lines). Memory is the output arrays plus about 25 times this
+# (4 MB: a 263 MB OBJ peaks at 0.63 GB; 4-16 MB parse at the same speed); tests set it tiny to
+# show the block boundaries change nothing
+BLOCK_SIZE = 4 * 1024 * 1024
+_HEAD_BYTES = 65536  # the start of the file checked for control bytes
+_SCAN_BYTES = 4 * 1024 * 1024  # chunks when only looking through the file (NUL, newline kind)
 
 # directives that are fine to ignore silently
 _IGNORED = {"mg", "maplib", "usemap", "lod", "shadow_obj", "trace_obj", "bevel", "c_interp",
@@ -116,23 +126,29 @@ _VAR_OPTIONS = {"-o", "-s", "-t"}
 
 
 # --------------------------------------------------------------------------- entry point
-def load(job: ImportJob) -> tuple[Scene, StageRecord]:
-    """Read ``job.path`` (OBJ + its MTL files) into a scene with polygons (n-gons kept)."""
+def load(job: ImportJob, *, block_size: int | None = None) -> tuple[Scene, StageRecord]:
+    """Read ``job.path`` (OBJ + its MTL files) into a scene with polygons (n-gons kept).
+
+    The file is parsed in blocks of whole lines of about ``block_size`` bytes (default
+    :data:`BLOCK_SIZE`); the result, warnings and errors do not depend on the block size."""
     t0 = time.perf_counter()
     path = Path(job.path)
     rec = StageRecord(name="import")
+    p = _Parser(path, bool(job.strict), rec)
     try:
-        raw = path.read_bytes()
+        f = open(path, "rb")
     except OSError as e:
         raise InputError(f"cannot read file: {e.strerror or e}", path=path) from None
-    _check_text(raw, path)
-    p = _Parser(raw, path, bool(job.strict), rec)
-    scene = p.run()
+    with f:
+        reader = _Reader(f, path, BLOCK_SIZE if block_size is None else block_size)
+        for block, final in reader.blocks():
+            p.feed(block, reader.nlb, final)
+    scene = p.finish()
     sizes = scene.poly_sizes
-    uniq, cnt = np.unique(sizes, return_counts=True) if len(sizes) else (np.zeros(0, int), [])
+    cnt = np.bincount(sizes) if len(sizes) else np.zeros(0, np.int64)
     rec.details.update({
         "format": "obj",
-        "polygon_sizes": {str(int(s)): int(c) for s, c in zip(uniq, cnt)},
+        "polygon_sizes": {str(int(s)): int(cnt[s]) for s in np.flatnonzero(cnt)},
         "vertices": scene.n_vertices,
         "polygons": scene.n_polygons,
         "materials": [m.name for m in scene.materials],
@@ -145,20 +161,16 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
     return scene, rec
 
 
-def _check_text(raw: bytes, path: Path) -> None:
-    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise InputError("UTF-16 text is not supported; save the OBJ as UTF-8 or ASCII", path=path)
-    nul = raw.find(b"\x00")
-    if nul >= 0:
-        raise InputError(f"not a text file (NUL byte at offset {nul}); expected Wavefront OBJ text",
-                         path=path)
-    head = np.frombuffer(raw[:65536], np.uint8)
-    if len(head):
-        ctrl = ((head < 32) & ~np.isin(head, (9, 10, 11, 12, 13, 26))) | (head == 127)
+def _control_bytes(head: bytes) -> str | None:
+    """Why the first bytes of a file do not look like text (None if they do)."""
+    arr = np.frombuffer(head, np.uint8)
+    if len(arr):
+        ctrl = ((arr < 32) & ~np.isin(arr, (9, 10, 11, 12, 13, 26))) | (arr == 127)
         n = int(ctrl.sum())
-        if n >= 8 and n > 0.01 * len(head):
-            raise InputError(f"not a text file ({n} control bytes in the first {len(head)}); "
-                             f"expected Wavefront OBJ text", path=path)
+        if n >= 8 and n > 0.01 * len(arr):
+            return (f"not a text file ({n} control bytes in the first {len(arr)}); expected "
+                    f"Wavefront OBJ text")
+    return None
 
 
 def _decode(b: bytes) -> tuple[str, bool]:
@@ -181,28 +193,202 @@ def _excl_cumsum(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def _concat(parts: list[np.ndarray], empty_shape: tuple, dtype) -> np.ndarray:
+    """The blocks' arrays as one (the list is emptied, so each part can be freed)."""
+    if not parts:
+        return np.zeros(empty_shape, dtype)
+    out = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    parts.clear()
+    return out
+
+
+class _Lines:
+    """How many lines something concerns, and the first few of them (for a message)."""
+
+    __slots__ = ("n", "first")
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.first: list[int] = []
+
+    def add(self, lines) -> None:
+        self.n += len(lines)
+        room = _FIRST_LINES + 1 - len(self.first)  # one more than shown: "..." or not
+        if room > 0:
+            self.first.extend(int(x) for x in lines[:room])
+
+    def text(self) -> str:
+        return _lines_list(np.array(self.first, dtype=np.int64))
+
+
+# --------------------------------------------------------------------------- reading in blocks
+class _Reader:
+    """The file's bytes as blocks of whole logical lines.
+
+    The checks of the whole-file reader come first, in its order: UTF-16, a NUL byte anywhere
+    (checked on every chunk read, with its offset in the file), control bytes in the first 64 KiB
+    (raised only once the rest of the file is known to hold no NUL). The UTF-8 BOM is dropped.
+    The newline byte is decided for the whole file, as before: LF, or CR when the file has CRs
+    but no LF at all. A block ends just after a newline that does not end a continued line
+    (backslash + newline), so every logical line lies in one block; the last block (``final``)
+    is the rest of the file, with or without a newline at its end.
+    """
+
+    def __init__(self, f, path: Path, block_size: int):
+        self.f, self.path = f, path
+        self.size = max(int(block_size), 1)
+        self.offset = 0  # bytes read so far
+        self.eof = False
+        head = self._read(_HEAD_BYTES, check_nul=False)
+        if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            raise InputError("UTF-16 text is not supported; save the OBJ as UTF-8 or ASCII", path=path)
+        self._nul(head, 0)
+        why = _control_bytes(head)
+        if why:
+            while self._read(_SCAN_BYTES):  # a NUL byte later in the file is reported first
+                pass
+            raise InputError(why, path=path)
+        if head.startswith(_BOM):
+            head = head[3:]
+        if b"\n" in head:
+            self.nlb = 10
+        elif self.eof:
+            self.nlb = 13 if b"\r" in head else 10
+        else:
+            self.nlb, head = self._scan_newlines(head)
+        self.head = head
+
+    def _nul(self, chunk: bytes, offset: int) -> None:
+        nul = chunk.find(b"\x00")
+        if nul >= 0:
+            raise InputError(f"not a text file (NUL byte at offset {offset + nul}); expected "
+                             f"Wavefront OBJ text", path=self.path)
+
+    def _read(self, n: int, check_nul: bool = True) -> bytes:
+        """Up to ``n`` bytes (fewer only at the end of the file)."""
+        parts, got = [], 0
+        while got < n and not self.eof:
+            try:
+                chunk = self.f.read(n - got)
+            except OSError as e:
+                raise InputError(f"cannot read file: {e.strerror or e}", path=self.path) from None
+            if not chunk:
+                self.eof = True
+                break
+            parts.append(chunk)
+            got += len(chunk)
+        data = parts[0] if len(parts) == 1 else b"".join(parts)
+        if check_nul:
+            self._nul(data, self.offset)
+        self.offset += len(data)
+        return data
+
+    def _scan_newlines(self, head: bytes) -> tuple[int, bytes]:
+        """The newline byte when the first 64 KiB have no LF: look through the rest of the file
+        (and come back), or keep the whole file if it cannot seek."""
+        cr, lf = b"\r" in head, False
+        if self.f.seekable():
+            pos, offset, eof = self.f.tell(), self.offset, self.eof
+            while not lf:
+                chunk = self._read(_SCAN_BYTES)
+                if not chunk:
+                    break
+                lf, cr = b"\n" in chunk, cr or b"\r" in chunk
+            self.f.seek(pos)
+            self.offset, self.eof = offset, eof
+        else:
+            rest = []
+            while chunk := self._read(_SCAN_BYTES):
+                rest.append(chunk)
+            head = b"".join([head, *rest])
+            lf, cr = b"\n" in head, b"\r" in head
+        return (10 if lf or not cr else 13), head
+
+    def blocks(self):
+        """Yield (block, final) pairs."""
+        buf, self.head = self.head, b""
+        start = 0  # buf[:start] is done
+        size = self.size
+        while True:
+            left = len(buf) - start
+            if left < size and not self.eof:
+                buf, start = buf[start:] + self._read(size - left), 0
+                continue
+            if self.eof and left <= size:
+                yield buf[start:], True
+                return
+            cut = _cut(buf, start, start + size, self.nlb)
+            if cut:
+                yield buf[start:cut], False
+                start = cut
+            elif self.eof:
+                yield buf[start:], True
+                return
+            else:  # one logical line longer than a block: take more
+                buf, start = buf[start:] + self._read(size), 0
+
+
+def _continued(buf: bytes, p: int, nlb: int) -> bool:
+    """The newline at ``p`` continues its line (backslash + newline)."""
+    return (p >= 1 and buf[p - 1] == 92) or (nlb == 10 and p >= 2 and buf[p - 1] == 13
+                                             and buf[p - 2] == 92)
+
+
+def _free_newlines(buf: bytes, lo: int, hi: int, nlb: int) -> np.ndarray:
+    """Positions in [lo, hi) of the newlines that do not continue their line."""
+    arr = np.frombuffer(buf, np.uint8)
+    p = np.flatnonzero(arr[lo:hi] == nlb) + lo
+    b1 = arr[np.maximum(p - 1, 0)]
+    cont = (p >= 1) & (b1 == 92)
+    if nlb == 10:
+        cont |= (p >= 2) & (b1 == 13) & (arr[np.maximum(p - 2, 0)] == 92)
+    return p[~cont]
+
+
+def _cut(buf: bytes, start: int, limit: int, nlb: int) -> int:
+    """Where to end the block that starts at ``start``: just after the last newline before
+    ``limit`` that does not continue its line, else after the first such one from ``limit`` on;
+    0 if there is none. (The byte before ``start`` is a newline that continues nothing.)"""
+    nl = b"\n" if nlb == 10 else b"\r"
+    p = buf.rfind(nl, start, limit)
+    if p >= 0 and _continued(buf, p, nlb):
+        free = _free_newlines(buf, start, p, nlb)
+        p = int(free[-1]) if len(free) else -1
+    if p >= 0:
+        return p + 1
+    p = buf.find(nl, limit)
+    if p >= 0 and _continued(buf, p, nlb):
+        free = _free_newlines(buf, p, len(buf), nlb)
+        p = int(free[0]) if len(free) else -1
+    return p + 1 if p >= 0 else 0
+
+
 # --------------------------------------------------------------------------- tokeniser
 class _Tokens:
-    """Token spans of a whole file and the logical line each belongs to (numpy arrays)."""
+    """Token spans of one block and the logical line each belongs to (numpy arrays).
 
-    def __init__(self, raw: bytes):
-        if raw.startswith(_BOM):
-            raw = raw[3:]
-        nlb = 10 if (b"\n" in raw or b"\r" not in raw) else 13  # bare-CR files
-        data = raw + bytes([nlb]) + b" "  # last line terminated; a spare byte for look-ahead
+    ``block`` holds whole lines (see :class:`_Reader`); ``phys0`` is the number of physical
+    lines before it, so ``line_no`` gives line numbers in the file. Line indices (``tline``,
+    ``lines_of`` ...) count the block's logical lines from 0."""
+
+    def __init__(self, block: bytes, nlb: int, final: bool = True, phys0: int = 0):
+        # the last line terminated (the file's may not be); a spare byte for look-ahead
+        data = b"".join((block, bytes((nlb, 32)) if final else b" "))
         self.data = data
         arr = np.frombuffer(data, np.uint8)
         self.arr = arr
         ws = arr <= 32  # whitespace: space, tab, CR, VT, FF (and other control bytes)
         nlmask = arr == nlb
         phys_nl = np.flatnonzero(nlmask)
+        self.n_phys = len(phys_nl)
         self.clean = arr  # the bytes with continuation backslashes made spaces
-        if b"\\" in raw:  # line continuation: backslash + end of line is whitespace
+        if b"\\" in block:  # line continuation: backslash + end of line is whitespace
             bs = np.flatnonzero(arr[:-2] == 92)
             c1 = bs[arr[bs + 1] == nlb]
             c2 = bs[(arr[bs + 1] == 13) & (arr[bs + 2] == 10)] if nlb == 10 else bs[:0]
             # a backslash at the very end of the file continues nothing: the newline after it is
-            # the one appended above, which must stay (else the last line has no terminator)
+            # the one appended above, which must stay (else the last line has no terminator).
+            # (A block that is not the last ends with a newline that continues nothing.)
             end = len(data) - 2
             c1, c2 = c1[c1 + 1 < end], c2[c2 + 2 < end]
             if len(c1) or len(c2):
@@ -219,22 +405,28 @@ class _Tokens:
         en = np.empty(len(arr), bool)
         en[0] = False
         np.less(ws[:-1], ws[1:], out=en[1:])
+        del ws
         ends = np.flatnonzero(en)
+        del en
         # token starts and logical newlines in one sorted array: a token's line is the number
         # of newlines before it
-        ev = np.flatnonzero(st | nlmask)
+        st |= nlmask
+        ev = np.flatnonzero(st)
+        del st
         ev_nl = nlmask[ev]
         nl = ev[ev_nl]
         line_of_ev = np.cumsum(ev_nl)
         tok_ev = ~ev_nl
         starts = ev[tok_ev]
         tline = line_of_ev[tok_ev]
+        del ev, ev_nl, line_of_ev, tok_ev
         self.n_lines = len(nl)
         if len(nl) == len(phys_nl):
-            self.line_no = np.arange(1, len(nl) + 1, dtype=np.int64)
+            self.line_no = np.arange(phys0 + 1, phys0 + len(nl) + 1, dtype=np.int64)
         else:
             line_start = np.concatenate([[0], nl[:-1] + 1])
-            self.line_no = np.searchsorted(phys_nl, line_start) + 1  # 1-based physical line
+            self.line_no = np.searchsorted(phys_nl, line_start) + (phys0 + 1)  # physical line
+        del nl, phys_nl, nlmask
         hashes = np.flatnonzero(arr[starts] == 35)
         if len(hashes):  # drop comment tokens and everything after them on their line
             stop = np.searchsorted(tline, tline[hashes], side="right")
@@ -291,29 +483,121 @@ def _ranges(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def _gather(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> bytes:
     """The bytes of the given token spans, each with the one (whitespace) byte that follows it."""
-    return arr[_ranges(starts, ends + 1)].tobytes().translate(_WS_TO_SPACE)
+    # spans [start, end] do not overlap: +1 at a start and -1 after the end, summed, is a mask
+    d = np.zeros(len(arr) + 1, np.int8)
+    d[starts] = 1
+    d[ends + 1] -= 1
+    mask = np.cumsum(d[:-1], dtype=np.int8).view(bool)
+    return arr[mask].tobytes().translate(_WS_TO_SPACE)
 
 
 # --------------------------------------------------------------------------- parser
+# Errors, in the order the checks run over the whole file: the first kind found anywhere wins,
+# and within a kind the first line (or, for NaN / range, all lines counted).
+(_E_V_NUMBER, _E_V_FEW, _E_V_NONFINITE, _E_V_HUGE, _E_VT_NUMBER, _E_VT_EMPTY, _E_VT_NONFINITE,
+ _E_CORNER, _E_CORNER_PARSE) = range(1, 10)
+_NO_ERROR = 100
+
+
 class _Parser:
-    def __init__(self, raw: bytes, path: Path, strict: bool, rec: StageRecord):
+    """Feed it the blocks in order (:meth:`feed`), then :meth:`finish` for the scene.
+
+    Each block is tokenised and parsed on its own; what crosses blocks is carried explicitly:
+    physical line count (line numbers), ``v``/``vt`` counts (relative indices), the current
+    ``usemtl``, and for messages the first error of each kind and counts with first lines.
+    Compact arrays per block (positions, UVs, face sizes, resolved indices, materials) are
+    concatenated at the end. Errors are raised at the end, in the whole-file order (a later
+    block may hold one that comes first); once a block has an error, later blocks are only
+    searched for errors that would come before it.
+    """
+
+    def __init__(self, path: Path, strict: bool, rec: StageRecord):
         self.path = path
         self.strict = strict
         self.rec = rec
-        self.t = _Tokens(raw)
+        self.t: _Tokens | None = None
         self.details: dict = {}
         self.files: list[Path] = [Path(os.path.abspath(path))]
-        self.latin1_lines: list[int] = []
+        self.phys = 0  # physical lines in the blocks so far
+        self.nv = self.nt = self.nf = self.nvn = 0  # v, vt, f, vn lines so far
+        self.best = _NO_ERROR  # the first error kind found so far
+        self.errors: dict[int, tuple[str, int]] = {}
+        self.nonfinite_v, self.huge_v, self.nonfinite_vt = _Lines(), _Lines(), _Lines()
+        # for warnings
+        self.odd_v, self.odd_v_values = _Lines(), 0
+        self.many_vt = _Lines()
+        self.latin1 = _Lines()
+        self.unknown: dict[str, list[int]] = {}  # directive -> [count, first line]
+        self.groups = self.n_l = self.n_p = 0
+        self.mtllibs: list[tuple[int, str]] = []
+        self.name_cache: dict[bytes, tuple[str, bool]] = {}  # decoded once per distinct name
+        self.names: list[str] = []
+        self.name_id: dict[str, int] = {}
+        self.current = self._name("default")  # the material of the next face
+        # vertex colours: (first vertex, rows (n, 4), has rgb, has alpha) of blocks with colours
+        self.col_blocks: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.col_min, self.col_max, self.col_whole = np.inf, -np.inf, True
+        self.col_vertices = 0
+        # per block
+        self.pos: list[np.ndarray] = []
+        self.uv: list[np.ndarray] = []
+        self.sizes: list[np.ndarray] = []
+        self.vres: list[np.ndarray] = []  # 0-based vertex index; -1: index 0 / before the file
+        self.tres: list[np.ndarray | None] = []  # the same for vt; -2: no vt; None: none at all
+        self.fmat: list[np.ndarray] = []  # material id per face
+        self.fline: list[np.ndarray | None] = []  # line numbers, kept for blocks with bad faces
+        self.fstart: list[int] = []  # first face of each block
+        self.first_bad: tuple | None = None  # the first face found bad within its block
 
     def err(self, msg: str, line: int | None = None, path: Path | None = None) -> InputError:
         return InputError(msg, path=path or self.path, line=line)
 
+    def _fail(self, kind: int, msg: str, line: int) -> None:
+        if kind not in self.errors:
+            self.errors[kind] = (msg, line)
+        self.best = min(self.best, kind)
+
+    def _count(self, kind: int, acc: _Lines, lines: np.ndarray) -> None:
+        acc.add(lines)
+        self.best = min(self.best, kind)
+
+    def _name(self, name: str) -> int:
+        if name not in self.name_id:
+            self.name_id[name] = len(self.names)
+            self.names.append(name)
+        return self.name_id[name]
+
+    # ------------------------------------------------------------------ one block
+    def feed(self, block: bytes, nlb: int, final: bool) -> None:
+        if self.best <= _E_V_NUMBER:
+            return  # nothing in a later block comes first (a NUL byte is the reader's)
+        t = self.t = _Tokens(block, nlb, final, self.phys)
+        self.phys += t.n_phys
+        vlines, vtlines = t.lines_of(_V), t.lines_of(_VT)
+        nv0, nt0 = self.nv, self.nt
+        self.nv += len(vlines)
+        self.nt += len(vtlines)
+        self.nvn += int(np.count_nonzero(t.line_kind == _VN))
+        self.vertices(vlines, nv0)
+        if self.best > _E_VT_NUMBER:
+            self.texcoords(vtlines)
+        faces = self.corners() if self.best > _E_CORNER else None
+        if self.best == _NO_ERROR:
+            uses = self.other_lines()
+            self.faces(faces, vlines, nv0, vtlines, nt0, uses)
+        else:  # an error will be raised: the arrays are not needed
+            for lst in (self.pos, self.uv, self.sizes, self.vres, self.tres, self.fmat, self.fline,
+                        self.col_blocks):
+                lst.clear()
+        self.t = None
+
     # ------------------------------------------------------------------ numbers
-    def _floats(self, kind: int, what: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """All numbers on lines of ``kind``: (values, values per line, line indices)."""
+    def _floats(self, kind: int, what: str, lines: np.ndarray, err: int
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+        """All numbers on lines of ``kind``: (values, values per line); None after a malformed
+        number (recorded as error ``err``)."""
         t = self.t
         s, e, tl = t.data_tokens(kind)
-        lines = t.lines_of(kind)
         counts = np.bincount(np.searchsorted(lines, tl), minlength=len(lines)).astype(np.int64)
         buf = _gather(t.clean, s, e)
         try:  # numpy >= 2.3 raises on anything that is not whitespace-separated numbers
@@ -334,10 +618,10 @@ class _Parser:
                     if _MSVC_SPECIAL.fullmatch(tok):
                         vals[i] = np.nan  # reported below as a non-finite value
                     else:
-                        line = int(t.line_no[tl[i]])
-                        raise self.err(f"malformed number '{_decode(tok)[0]}' in a '{what}' line "
-                                       f"(expected a decimal number)", line) from None
-        return vals, counts, lines
+                        self._fail(err, f"malformed number '{_decode(tok)[0]}' in a '{what}' line "
+                                        f"(expected a decimal number)", int(t.line_no[tl[i]]))
+                        return None
+        return vals, counts
 
     @staticmethod
     def _rows(vals: np.ndarray, counts: np.ndarray, width: int) -> np.ndarray:
@@ -359,23 +643,25 @@ class _Parser:
         out[row, col] = vals[src]
         return out
 
-    def _nonfinite(self, bad_rows: np.ndarray, lines: np.ndarray, what: str) -> None:
-        if bad_rows.any():
-            ln = self.t.line_no[lines[bad_rows]]
-            raise self.err(f"{what} are NaN or infinite on {int(bad_rows.sum())} line(s): "
-                           f"{_lines_list(ln)}", int(ln[0]))
-
-    def vertices(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        vals, counts, lines = self._floats(_V, "v")
+    def vertices(self, lines: np.ndarray, first: int) -> None:
+        got = self._floats(_V, "v", lines, _E_V_NUMBER)
+        if got is None:
+            return
+        vals, counts = got
         ln = self.t.line_no
         few = counts < 3
         if few.any():
             i = int(np.argmax(few))
-            raise self.err(f"vertex needs x y z, got {int(counts[i])} value(s)", int(ln[lines[i]]))
+            self._fail(_E_V_FEW, f"vertex needs x y z, got {int(counts[i])} value(s)",
+                       int(ln[lines[i]]))
+            return
+        if self.best < _E_V_NONFINITE:
+            return
         odd = (counts == 5) | (counts > 7)
         if odd.any():
-            self.rec.warn(f"{int(odd.sum())} 'v' line(s) have {int(counts[odd][0])} values (expected "
-                          f"3, 4, 6 or 7); extra values ignored (lines {_lines_list(ln[lines[odd]])})")
+            if not self.odd_v.n:
+                self.odd_v_values = int(counts[odd][0])
+            self.odd_v.add(ln[lines[odd]])
         rows = self._rows(vals, counts, 7)
         has_col = (counts == 6) | (counts == 7)
         has_a = counts == 7
@@ -383,53 +669,60 @@ class _Parser:
         used[:, :3] = True
         used[has_col, 3:6] = True
         used[has_a, 6] = True
-        self._nonfinite((~np.isfinite(rows) & used).any(axis=1), lines, "vertex values")
+        bad = (~np.isfinite(rows) & used).any(axis=1)
+        if bad.any():
+            self._count(_E_V_NONFINITE, self.nonfinite_v, ln[lines[bad]])
+            return
+        if self.best < _E_V_HUGE:
+            return
         huge = (np.abs(rows[:, :3]) > MAX_COORDINATE).any(axis=1)
         if huge.any():
-            ln = self.t.line_no[lines[huge]]
-            raise self.err(f"vertex coordinates beyond +-{MAX_COORDINATE:g} (the range bake supports) on "
-                           f"{int(huge.sum())} line(s): {_lines_list(ln)}", int(ln[0]))
-        pos = np.ascontiguousarray(rows[:, :3], dtype=np.float64)
-        colors = None
+            self._count(_E_V_HUGE, self.huge_v, ln[lines[huge]])
+            return
+        if self.best < _NO_ERROR:
+            return
+        self.pos.append(np.ascontiguousarray(rows[:, :3], dtype=np.float64))
         if has_col.any():
             col = np.ones((len(rows), 4))
             col[has_col, :3] = rows[has_col, 3:6]
             col[has_a, 3] = rows[has_a, 6]
             given = np.concatenate([rows[has_col, 3:6].ravel(), rows[has_a, 6]])
-            self.details["vertex_color_scale"] = "0-1"
-            if given.max() > 1.0 and (given == np.round(given)).all() and given.min() >= 0:
-                col[has_col, :3] /= 255.0
-                col[has_a, 3] /= 255.0
-                self.details["vertex_color_scale"] = "0-255"
-            elif given.max() > 1.0 or given.min() < 0.0:
-                self.rec.warn(f"vertex colours outside [0, 1] (from {given.min():g} to "
-                              f"{given.max():g}) were clipped")
-            np.clip(col, 0.0, 1.0, out=col)
-            if not has_col.all():
-                self.rec.warn(f"{int((~has_col).sum())} of {len(rows)} vertices have no colour; "
-                              f"they get white")
-            colors = col
-        self.details["vertex_colors"] = colors is not None
-        return pos, colors, lines
+            self.col_min = min(self.col_min, float(given.min()))
+            self.col_max = max(self.col_max, float(given.max()))
+            self.col_whole = self.col_whole and bool((given == np.round(given)).all())
+            self.col_vertices += int(has_col.sum())
+            self.col_blocks.append((first, col, has_col, has_a))
 
-    def texcoords(self) -> tuple[np.ndarray, np.ndarray]:
-        vals, counts, lines = self._floats(_VT, "vt")
+    def texcoords(self, lines: np.ndarray) -> None:
+        got = self._floats(_VT, "vt", lines, _E_VT_NUMBER)
+        if got is None:
+            return
+        vals, counts = got
         ln = self.t.line_no
         if (counts < 1).any():
             i = int(np.argmax(counts < 1))
-            raise self.err("texture coordinate needs u [v [w]], got no values", int(ln[lines[i]]))
-        if (counts > 3).any():
-            self.rec.warn(f"{int((counts > 3).sum())} 'vt' line(s) have more than 3 values; extra "
-                          f"values ignored (lines {_lines_list(ln[lines[counts > 3]])})")
+            self._fail(_E_VT_EMPTY, "texture coordinate needs u [v [w]], got no values",
+                       int(ln[lines[i]]))
+            return
+        if self.best < _E_VT_NONFINITE:
+            return
+        many = counts > 3
+        if many.any():
+            self.many_vt.add(ln[lines[many]])
         rows = self._rows(vals, counts, 2)
         used = np.ones_like(rows, dtype=bool)
         used[counts < 2, 1] = False
-        self._nonfinite((~np.isfinite(rows) & used).any(axis=1), lines, "texture coordinates")
-        return np.ascontiguousarray(rows, dtype=np.float64), lines
+        bad = (~np.isfinite(rows) & used).any(axis=1)
+        if bad.any():
+            self._count(_E_VT_NONFINITE, self.nonfinite_vt, ln[lines[bad]])
+            return
+        if self.best == _NO_ERROR:
+            self.uv.append(np.ascontiguousarray(rows, dtype=np.float64))
 
     # ------------------------------------------------------------------ faces
-    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Face lines, corners per face, corner index fields (C, 3) int64 and presence (C, 3).
+    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Face lines, corners per face, corner index fields (C, 3) int64 and presence (C, 3);
+        None after a malformed corner (recorded).
 
         Corner tokens are validated byte-wise (digits, one leading sign per field, at most two
         '/', no empty vertex field, at most 18 characters per field), then empty fields get a
@@ -466,16 +759,25 @@ class _Parser:
         seps = np.flatnonzero((cb == _C_SLASH) | (cb == _C_SPACE))
         flen = np.diff(seps, prepend=-1) - 1
         mark(seps[flen > 18])
+        del cb, seps, flen
         if bad.any():
             i = int(np.argmax(bad))
-            raise self.err(f"malformed face corner '{t.token(int(s[i]), int(e[i]))}' (expected v, "
-                           f"v/vt, v//vn or v/vt/vn with integer indices)", int(t.line_no[tl[i]]))
+            self._fail(_E_CORNER, f"malformed face corner '{t.token(int(s[i]), int(e[i]))}' "
+                                  f"(expected v, v/vt, v//vn or v/vt/vn with integer indices)",
+                       int(t.line_no[tl[i]]))
+            return None
         if len(sl):
             buf = buf.replace(b"//", b"/" + _ABSENT_B + b"/").replace(b"/ ", b"/" + _ABSENT_B + b" ")
             buf = buf.replace(b"/", b" ")
         vals = np.fromstring(buf, dtype=np.int64, sep=" ")
+        del buf
         if len(vals) != C + int(nsl.sum()):  # cannot happen after validation; never guess
-            raise self.err("could not parse face indices", int(t.line_no[tl[0]]))
+            self._fail(_E_CORNER_PARSE, "could not parse face indices", int(t.line_no[tl[0]]))
+            return None
+        if not len(sl):  # the usual "f 1 2 3": vertex indices only
+            idx[:, 0] = np.where(vals == _ABSENT, 0, vals)
+            has[:, 0] = vals != _ABSENT
+            return flines, sizes, idx, has
         off = np.arange(C, dtype=np.int64) + _excl_cumsum(nsl)
         for k in range(3):
             m = nsl >= k
@@ -483,6 +785,61 @@ class _Parser:
             idx[m, k] = np.where(v == _ABSENT, 0, v)
             has[m, k] = v != _ABSENT
         return flines, sizes, idx, has
+
+    def faces(self, faces, vlines: np.ndarray, nv0: int, vtlines: np.ndarray, nt0: int,
+              uses: list[tuple[int, str]]) -> None:
+        """Resolve this block's corners against the ``v``/``vt`` lines so far (relative indices
+        and indices 0 are final here; an index beyond the file's last vertex is known only at
+        the end) and give each face its material."""
+        flines, sizes, idx, has = faces
+        nfb = len(flines)
+        f0 = self.nf
+        self.nf += nfb
+        self.fstart.append(f0)
+        if uses:
+            ul = np.array([ln for ln, _ in uses], dtype=np.int64)
+            occ = np.array([self._name(nm or "default") for _, nm in uses], dtype=np.int32)
+            o = np.searchsorted(ul, flines, side="right") - 1
+            fmat = np.where(o >= 0, occ[np.maximum(o, 0)], np.int32(self.current)).astype(np.int32)
+            self.current = int(occ[-1])
+        else:
+            fmat = np.full(nfb, self.current, np.int32)
+        face_of = np.repeat(np.arange(nfb, dtype=np.int64), sizes)
+        vbefore = (nv0 + np.searchsorted(vlines, flines))[face_of]
+        raw, present = idx[:, 0], has[:, 0]
+        vres = np.where(raw > 0, raw - 1, vbefore + raw)
+        bad = present & ((raw == 0) | (vres < 0))  # index 0, or relative and before the file
+        vres[bad] = -1
+        if not present.all():
+            vres[~present] = 0
+        tres = tbefore = None
+        if has[:, 1].any():
+            tbefore = (nt0 + np.searchsorted(vtlines, flines))[face_of]
+            traw, tp = idx[:, 1], has[:, 1]
+            tres = np.where(traw > 0, traw - 1, tbefore + traw)
+            tbad = tp & ((traw == 0) | (tres < 0))
+            tres[tbad] = -1
+            tres[~tp] = -2
+            bad |= tbad
+        badf = sizes < 3
+        if bad.any():
+            badf[face_of[bad]] = True
+        del face_of, bad
+        # faces that may point past the file's last vertex / vt (known at the end)
+        ahead = ((len(vres) and int(vres.max()) >= self.nv)
+                 or (tres is not None and len(tres) and int(tres.max()) >= self.nt))
+        anybad = bool(badf.any())
+        self.fline.append(self.t.line_no[flines] if anybad or ahead else None)
+        if anybad and self.first_bad is None:
+            f = int(np.argmax(badf))
+            c0 = int(_excl_cumsum(sizes)[f])
+            c1 = c0 + int(sizes[f])
+            tb = tbefore[c0:c1].copy() if tbefore is not None else np.zeros(c1 - c0, np.int64)
+            self.first_bad = (f0 + f, idx[c0:c1].copy(), has[c0:c1].copy(), vbefore[c0:c1].copy(), tb)
+        self.sizes.append(sizes)
+        self.vres.append(vres)
+        self.tres.append(tres)
+        self.fmat.append(fmat)
 
     def resolve(self, raw: np.ndarray, present: np.ndarray, before: np.ndarray, total: int
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -509,104 +866,193 @@ class _Parser:
                 return f"face {what} {r} is out of range (file has {total} {unit})"
         return None
 
-    # ------------------------------------------------------------------ main
-    def run(self) -> Scene:
-        t = self.t
-        rec = self.rec
-        positions, colors, vlines = self.vertices()
-        uvs, vtlines = self.texcoords()
-        flines, sizes, idx, has = self.corners()
-        NV, NT, NF = len(positions), len(uvs), len(flines)
-        self.details.update({"texcoords": NT, "normals": int((t.line_kind == _VN).sum())})
-        other = self.other_lines()
+    def _face_line(self, face: int) -> int:
+        b = int(np.searchsorted(self.fstart, face, side="right")) - 1
+        return int(self.fline[b][face - self.fstart[b]])
 
-        # ---- resolve indices
-        face_of = np.repeat(np.arange(NF, dtype=np.int64), sizes)
-        vbefore = np.searchsorted(vlines, flines)[face_of]
-        tbefore = np.searchsorted(vtlines, flines)[face_of]
-        vres, vzero, voor = self.resolve(idx[:, 0], has[:, 0], vbefore, NV)
-        badc = vzero | voor
-        if has[:, 1].any():
-            tres, tzero, toor = self.resolve(idx[:, 1], has[:, 1], tbefore, NT)
-            badc |= tzero | toor
-        else:
-            tres = np.zeros(len(idx), np.int64)
-            tzero = toor = np.zeros(len(idx), bool)
-        badf = (sizes < 3) | (np.bincount(face_of[badc], minlength=NF) > 0)
-        dropped = int(badf.sum())
+    def _why(self, face: int, size: int, c0: int, vres: np.ndarray, tres: np.ndarray | None,
+             NV: int, NT: int) -> str:
+        """Why the first bad face is bad (the whole-file parser's message)."""
+        if size < 3:
+            return f"face has fewer than 3 vertices ({size} given)"
+        if self.first_bad is not None and self.first_bad[0] == face:
+            _, idx, has, vbefore, tbefore = self.first_bad
+            vraw, traw = idx[:, 0], idx[:, 1]
+            _, vzero, voor = self.resolve(vraw, has[:, 0], vbefore, NV)
+            _, tzero, toor = self.resolve(traw, has[:, 1], tbefore, NT)
+        else:  # bad only because an index lies beyond the end of the file
+            v = vres[c0:c0 + size]
+            vraw, vzero, voor, vbefore = v + 1, np.zeros(size, bool), v >= NV, v
+            if tres is None:
+                traw = tbefore = np.zeros(size, np.int64)
+                tzero = toor = np.zeros(size, bool)
+            else:
+                tc = tres[c0:c0 + size]
+                traw, tzero, toor, tbefore = tc + 1, np.zeros(size, bool), tc >= NT, tc
+        return (self.face_problem(0, size, vraw, vzero, voor, vbefore, NV, "index", "vertices")
+                or self.face_problem(0, size, traw, tzero, toor, tbefore, NT, "texture index",
+                                     "texture coordinates")
+                or "")
+
+    # ------------------------------------------------------------------ the end
+    def _raise_first_error(self) -> None:
+        kind = self.best
+        if kind == _NO_ERROR:
+            return
+        acc = {_E_V_NONFINITE: (self.nonfinite_v, "vertex values"),
+               _E_VT_NONFINITE: (self.nonfinite_vt, "texture coordinates")}
+        if kind in acc:
+            lines, what = acc[kind]
+            raise self.err(f"{what} are NaN or infinite on {lines.n} line(s): {lines.text()}",
+                           lines.first[0])
+        if kind == _E_V_HUGE:
+            lines = self.huge_v
+            raise self.err(f"vertex coordinates beyond +-{MAX_COORDINATE:g} (the range bake supports) on "
+                           f"{lines.n} line(s): {lines.text()}", lines.first[0])
+        msg, line = self.errors[kind]
+        raise self.err(msg, line)
+
+    def _vertex_colors(self, NV: int) -> np.ndarray | None:
+        colors = None
+        if self.col_blocks:
+            self.details["vertex_color_scale"] = "0-1"
+            scale = self.col_max > 1.0 and self.col_whole and self.col_min >= 0
+            if scale:
+                self.details["vertex_color_scale"] = "0-255"
+            elif self.col_max > 1.0 or self.col_min < 0.0:
+                self.rec.warn(f"vertex colours outside [0, 1] (from {self.col_min:g} to "
+                              f"{self.col_max:g}) were clipped")
+            colors = np.ones((NV, 4))
+            for first, col, has_col, has_a in self.col_blocks:
+                if scale:
+                    col[has_col, :3] /= 255.0
+                    col[has_a, 3] /= 255.0
+                colors[first:first + len(col)] = col
+            self.col_blocks.clear()
+            np.clip(colors, 0.0, 1.0, out=colors)
+            if self.col_vertices < NV:
+                self.rec.warn(f"{NV - self.col_vertices} of {NV} vertices have no colour; "
+                              f"they get white")
+        self.details["vertex_colors"] = colors is not None
+        return colors
+
+    def finish(self) -> Scene:
+        self._raise_first_error()
+        rec = self.rec
+        NV, NT, NF = self.nv, self.nt, self.nf
+        if self.odd_v.n:
+            rec.warn(f"{self.odd_v.n} 'v' line(s) have {self.odd_v_values} values (expected "
+                     f"3, 4, 6 or 7); extra values ignored (lines {self.odd_v.text()})")
+        positions = _concat(self.pos, (0, 3), np.float64)
+        colors = self._vertex_colors(NV)
+        if self.many_vt.n:
+            rec.warn(f"{self.many_vt.n} 'vt' line(s) have more than 3 values; extra "
+                     f"values ignored (lines {self.many_vt.text()})")
+        uvs = _concat(self.uv, (0, 2), np.float64)
+        self.details.update({"texcoords": NT, "normals": self.nvn})
+        self.details["groups_objects_smoothing_lines"] = self.groups
+        if self.n_l or self.n_p:
+            rec.warn(f"skipped {self.n_l} line element(s) ('l') and {self.n_p} point element(s) "
+                     f"('p'); only faces are imported")
+        self.details["skipped_elements"] = {"l": self.n_l, "p": self.n_p}
+        unknown = self.unknown
+        if unknown:
+            parts = [f"'{k}' x{v[0]} (first at line {v[1]})" for k, v in sorted(unknown.items())]
+            rec.warn(f"ignored {sum(v[0] for v in unknown.values())} line(s) with unsupported "
+                     f"or unknown directives: {', '.join(parts)}")
+        self.details["unknown_directives"] = {k: v[0] for k, v in sorted(unknown.items())}
+
+        # ---- faces: indices beyond the end of the file, bad faces
+        sizes = _concat(self.sizes, (0,), np.int64)
+        tres = None
+        if any(x is not None for x in self.tres):
+            tres = np.concatenate([np.full(len(v), -2, np.int64) if x is None else x
+                                   for v, x in zip(self.vres, self.tres)])
+        self.tres.clear()
+        vres = _concat(self.vres, (0,), np.int64)
+        badc = vres < 0
+        badc |= vres >= NV
+        if tres is not None:
+            badc |= tres == -1
+            badc |= tres >= NT
+        badf = sizes < 3
+        cend = None
+        if badc.any():
+            cend = np.cumsum(sizes)
+            badf[np.searchsorted(cend, np.flatnonzero(badc), side="right")] = True
+        del badc
+        dropped = int(np.count_nonzero(badf))
         if dropped:
             order = np.flatnonzero(badf)
             f0 = int(order[0])
-            c0 = int(_excl_cumsum(sizes)[f0])
-            if sizes[f0] < 3:
-                why = f"face has fewer than 3 vertices ({int(sizes[f0])} given)"
-            else:
-                why = (self.face_problem(c0, int(sizes[f0]), idx[:, 0], vzero, voor, vbefore,
-                                         NV, "index", "vertices")
-                       or self.face_problem(c0, int(sizes[f0]), idx[:, 1], tzero, toor, tbefore,
-                                            NT, "texture index", "texture coordinates"))
-            line = int(t.line_no[flines[f0]])
+            c0 = int(cend[f0] - sizes[f0]) if cend is not None else int(sizes[:f0].sum())
+            why = self._why(f0, int(sizes[f0]), c0, vres, tres, NV, NT)
+            line = self._face_line(f0)
             if self.strict:
                 raise self.err(why, line)
+            shown = np.array([self._face_line(int(f)) for f in order[:_FIRST_LINES + 1]])
             rec.warn(f"dropped {dropped} bad face(s) (index 0, index out of range or fewer than 3 "
-                     f"vertices) at lines {_lines_list(t.line_no[flines[order]])}; first, line "
-                     f"{line}: {why}")
-        keepc = ~badf[face_of] if dropped else slice(None)
-        sizes_k = sizes[~badf] if dropped else sizes
-        poly_indices = vres[keepc]
-        has_t = has[keepc, 1]
+                     f"vertices) at lines {_lines_list(shown)}; first, line {line}: {why}")
+            del order
+        keepf = ~badf if dropped else slice(None)
+        keepc = np.repeat(~badf, sizes) if dropped else slice(None)
+        del badf
+        sizes_k = sizes[keepf] if dropped else sizes
+        poly_indices = vres[keepc] if dropped else vres
+        del vres
         poly_uvs = None
-        self.details["uv_corners"] = int(has_t.sum())
-        if has_t.any():
-            poly_uvs = np.where(has_t[:, None], uvs[tres[keepc]], 0.0)
-            if not has_t.all():
-                rec.warn(f"{int((~has_t).sum())} of {len(has_t)} face corners have no texture "
+        if tres is not None:
+            tk = tres[keepc] if dropped else tres
+            del tres
+            has_t = tk != -2
+            n_t = int(np.count_nonzero(has_t))
+        else:
+            has_t, n_t = None, 0
+        self.details["uv_corners"] = n_t
+        if n_t:
+            all_t = n_t == len(has_t)
+            poly_uvs = uvs[tk if all_t else np.where(has_t, tk, 0)]
+            del tk
+            if not all_t:
+                poly_uvs[~has_t] = 0.0
+                rec.warn(f"{len(has_t) - n_t} of {len(has_t)} face corners have no texture "
                          f"coordinate (vt); they get UV (0, 0)")
+        del has_t
         self.details["dropped_faces"] = dropped
+        fmat = _concat(self.fmat, (0,), np.int32)
+        self.fmat.clear()
+        if dropped:
+            fmat = fmat[keepf]
 
         # ---- materials
-        mtl = self.materials_from(other["mtllib"])
-        use_lines = np.array([ln for ln, _ in other["usemtl"]], dtype=np.int64)
-        names: list[str] = []
-        name_id: dict[str, int] = {}
-        occ = []
-        for _, nm in other["usemtl"]:
-            nm = nm or "default"
-            if nm not in name_id:
-                name_id[nm] = len(names)
-                names.append(nm)
-            occ.append(name_id[nm])
-        occ_arr = np.array(occ, dtype=np.int64)
-        if "default" not in name_id:
-            name_id["default"] = len(names)
-            names.append("default")
-        o = np.searchsorted(use_lines, flines[~badf], side="right") - 1
-        face_name = np.where(o >= 0, occ_arr[np.maximum(o, 0)] if len(occ_arr) else 0,
-                             name_id["default"])
-        if len(face_name):
-            u, first = np.unique(face_name, return_index=True)
+        mtl = self.materials_from(self.mtllibs)
+        names = self.names
+        if len(fmat):  # materials in order of first use (faces come in runs of one material)
+            heads = fmat[np.concatenate([[0], np.flatnonzero(fmat[1:] != fmat[:-1]) + 1])]
+            u, first = np.unique(heads, return_index=True)
             used = u[np.argsort(first, kind="stable")]
             lut = np.zeros(len(names), np.int64)
             lut[used] = np.arange(len(used))
-            poly_material = lut[face_name]
+            poly_material = lut[fmat]
             used_names = [names[i] for i in used]
         else:
             poly_material = np.zeros(0, np.int64)
             used_names = []
-        materials, unknown = [], []
+        del fmat
+        materials, unknown_m = [], []
         for nm in used_names:
             if nm in mtl:
                 materials.append(mtl[nm])
             elif nm == "default":
                 materials.append(DEFAULT_MATERIAL)
             else:
-                unknown.append(nm)
+                unknown_m.append(nm)
                 materials.append(Material(name=nm))
-        if unknown:
-            shown = ", ".join(repr(n) for n in unknown[:_FIRST_LINES])
-            more = ", ..." if len(unknown) > _FIRST_LINES else ""
-            rec.warn(f"{len(unknown)} material(s) used by faces are not defined in any loaded .mtl: "
-                     f"{shown}{more}; they get the default colour")
+        if unknown_m:
+            shown = ", ".join(repr(n) for n in unknown_m[:_FIRST_LINES])
+            more = ", ..." if len(unknown_m) > _FIRST_LINES else ""
+            rec.warn(f"{len(unknown_m)} material(s) used by faces are not defined in any loaded "
+                     f".mtl: {shown}{more}; they get the default colour")
         self.details["materials_unused"] = sorted(n for n in mtl if n not in set(used_names))
         if not materials:
             materials = [DEFAULT_MATERIAL]
@@ -616,61 +1062,59 @@ class _Parser:
 
         if len(sizes_k) == 0:
             rec.warn("no faces in file" if NF == 0 else "no faces left after dropping bad faces")
-        if self.latin1_lines:
-            rec.warn(f"names on {len(self.latin1_lines)} line(s) are not UTF-8 and were decoded as "
-                     f"Latin-1 (lines {_lines_list(np.array(self.latin1_lines))})")
+        if self.latin1.n:
+            rec.warn(f"names on {self.latin1.n} line(s) are not UTF-8 and were decoded as "
+                     f"Latin-1 (lines {self.latin1.text()})")
         return Scene(
             positions=positions,
-            poly_sizes=sizes_k.astype(np.int64),
-            poly_indices=poly_indices.astype(np.int64),
-            poly_material=poly_material.astype(np.int64),
+            poly_sizes=sizes_k.astype(np.int64, copy=False),
+            poly_indices=poly_indices.astype(np.int64, copy=False),
+            poly_material=poly_material.astype(np.int64, copy=False),
             poly_uvs=poly_uvs,
             vertex_colors=colors,
             materials=tuple(materials),
             source=SourceInfo(path=self.files[0], files_read=tuple(self.files), format="obj"),
         )
 
-    def other_lines(self) -> dict:
-        """Walk the lines that are not v/vt/vn/f/o/g/s: usemtl, mtllib, l/p, unknown."""
+    def other_lines(self) -> list[tuple[int, str]]:
+        """Walk this block's lines that are not v/vt/vn/f/o/g/s: usemtl, mtllib, l/p, unknown.
+        Returns the ``usemtl`` lines (index in the block, name)."""
         t = self.t
-        out: dict = {"usemtl": [], "mtllib": []}
-        unknown: dict[str, list[int]] = {}
+        uses: list[tuple[int, str]] = []
         kinds = t.line_kind
         lines = np.flatnonzero(kinds == _OTHER)
-        data = t.clean.tobytes() if t.clean is not t.arr else t.data
-        names: dict[bytes, tuple[str, bool]] = {}  # decoded once per distinct name
-        for line, ks, ke, le, ln in zip(lines.tolist(), t.kw_start[lines].tolist(),
-                                        t.kw_end[lines].tolist(), t.line_end[lines].tolist(),
-                                        t.line_no[lines].tolist()):
-            kw = data[ks:ke]
-            if kw == b"usemtl" or kw == b"mtllib":
-                rest = data[ke:le].strip()
-                if rest not in names:
-                    names[rest] = _decode(rest)
-                text, fb = names[rest]
-                if fb:
-                    self.latin1_lines.append(ln)
-                if kw == b"usemtl":
-                    out["usemtl"].append((line, text))
+        if len(lines):
+            data = t.clean.tobytes() if t.clean is not t.arr else t.data
+            names = self.name_cache
+            unknown = self.unknown
+            latin1: list[int] = []
+            for line, ks, ke, le, ln in zip(lines.tolist(), t.kw_start[lines].tolist(),
+                                            t.kw_end[lines].tolist(), t.line_end[lines].tolist(),
+                                            t.line_no[lines].tolist()):
+                kw = data[ks:ke]
+                if kw == b"usemtl" or kw == b"mtllib":
+                    rest = data[ke:le].strip()
+                    if rest not in names:
+                        names[rest] = _decode(rest)
+                    text, fb = names[rest]
+                    if fb:
+                        latin1.append(ln)
+                    if kw == b"usemtl":
+                        uses.append((line, text))
+                    else:
+                        self.mtllibs.append((ln, text))
                 else:
-                    out["mtllib"].append((ln, text))
-            else:
-                k = _decode(kw)[0]
-                if k not in _IGNORED:
-                    unknown.setdefault(k, []).append(ln)
-        groups = int((kinds == _GROUP).sum())
-        self.details["groups_objects_smoothing_lines"] = groups
-        n_l, n_p = int((kinds == _L).sum()), int((kinds == _P).sum())
-        if n_l or n_p:
-            self.rec.warn(f"skipped {n_l} line element(s) ('l') and {n_p} point element(s) ('p'); "
-                          f"only faces are imported")
-        self.details["skipped_elements"] = {"l": n_l, "p": n_p}
-        if unknown:
-            parts = [f"'{k}' x{len(v)} (first at line {v[0]})" for k, v in sorted(unknown.items())]
-            self.rec.warn(f"ignored {sum(len(v) for v in unknown.values())} line(s) with unsupported "
-                          f"or unknown directives: {', '.join(parts)}")
-        self.details["unknown_directives"] = {k: len(v) for k, v in sorted(unknown.items())}
-        return out
+                    k = _decode(kw)[0]
+                    if k not in _IGNORED:
+                        if k in unknown:
+                            unknown[k][0] += 1
+                        else:
+                            unknown[k] = [1, ln]
+            self.latin1.add(latin1)
+        self.groups += int(np.count_nonzero(kinds == _GROUP))
+        self.n_l += int(np.count_nonzero(kinds == _L))
+        self.n_p += int(np.count_nonzero(kinds == _P))
+        return uses
 
     # ------------------------------------------------------------------ MTL
     def materials_from(self, mtllibs: list[tuple[int, str]]) -> dict[str, Material]:

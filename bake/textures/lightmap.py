@@ -4,7 +4,11 @@ Pieces, in the order a bake uses them:
 
 * :func:`unwrap` -> :class:`Atlas`: xatlas charts and packs the mesh (in a subprocess with a
   timeout, ``xatlas_worker.py``; the result is cached by a hash of the exact input and options,
-  so a rerun is fast and gives identical UVs). Per-corner lightmap UVs use the same convention
+  so a rerun is fast and gives identical UVs; the default cache is ``.bake-cache/xatlas`` in the
+  output folder). xatlas's tolerances are absolute, so it sees the mesh centred and, when it is
+  not of a size xatlas handles well, multiplied by a power of two (:func:`xatlas_scale`); the
+  options in model units are converted to match, so a model in millimetres or kilometres gets
+  about the atlas it gets in metres. Per-corner lightmap UVs use the same convention
   as ``tri_uvs``: ``(0, 0)`` is the bottom-left of the image, ``v`` grows upward; the image is
   ``(H, W, C)`` with row 0 at the top, so texel ``(row i, column j)`` covers
   ``x = u * W`` in ``[j, j + 1)`` and ``y = (1 - v) * H`` in ``[i, i + 1)``.
@@ -35,9 +39,9 @@ one from the lighting stage's own kernels (lights, sky, AO, a final gather of bo
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -54,12 +58,25 @@ from scipy.sparse import linalg as sparse_linalg
 
 from ..config import LightmapConfig
 from ..errors import StageError
+from ..export.write import write_atomic
 from ..scene import Scene
 
 WORKER = Path(__file__).with_name("xatlas_worker.py")
 # How the worker is started (tests replace it to check crash and timeout handling).
 WORKER_COMMAND: list[str] = [sys.executable, str(WORKER)]
 CACHE_FORMAT = "scratch-bake xatlas cache 1"
+CACHE_SUBDIR = Path(".bake-cache") / "xatlas"  # the default cache, inside the output folder
+
+# xatlas's tolerances are absolute (XA_EPSILON = 1e-4 on lengths, FLT_EPSILON on areas, a
+# colocal distance of 1.2e-7), so its atlas depends on the model's units: a model 0.0074 across
+# lost 576 of 590 triangles (14x14 atlas), one 0.3 across got a 48x45 atlas where the same mesh
+# 5 across got 81x84. Measured with xatlas 0.0.11 on five meshes, the atlas is bit-identical
+# under power-of-two scaling while the model is roughly 10 to 2,500 across. Models whose extent
+# (largest bounding-box side) lies in XATLAS_PLAIN_EXTENTS reach xatlas as before (centred
+# only); others are multiplied by the power of two that puts their extent in
+# [2^XATLAS_TARGET_EXPONENT, 2^(XATLAS_TARGET_EXPONENT + 1)), the middle of that range.
+XATLAS_PLAIN_EXTENTS = (1.0, 4096.0)
+XATLAS_TARGET_EXPONENT = 7
 
 EDGE_WEIGHT = 1e-3  # weight of a clamped sample (a triangle that only grazes the texel)
 PAIRS_PER_CHUNK = 1 << 19  # bounds the temporary arrays of the rasteriser
@@ -85,10 +102,11 @@ class Atlas:
     key: str  # hash of xatlas's exact input and options (the cache key)
     chart_count: int = 0
     utilization: float = 0.0  # xatlas: fraction of the atlas covered by charts
-    texels_per_unit: float = 0.0
+    texels_per_unit: float = 0.0  # texels per model unit
     seconds: float = 0.0  # xatlas time when it ran (also kept for a cache hit)
     cached: bool = False
     xatlas_version: str = ""
+    xatlas_scale: float = 1.0  # the power of two xatlas saw the (centred) model multiplied by
 
     @property
     def n_triangles(self) -> int:
@@ -115,38 +133,60 @@ def xatlas_version() -> str:
         return "unknown"
 
 
-def xatlas_options(cfg: LightmapConfig) -> dict:
+def xatlas_scale(extent: float) -> float:
+    """The power of two xatlas sees a centred model of this extent (largest bounding-box side)
+    multiplied by: 1 inside ``XATLAS_PLAIN_EXTENTS``, else the one that puts the extent in
+    ``[2^XATLAS_TARGET_EXPONENT, 2^(XATLAS_TARGET_EXPONENT + 1))``. A power of two is exact in
+    float32 and float64, so models that differ by one get exactly the same xatlas input."""
+    lo, hi = XATLAS_PLAIN_EXTENTS
+    if not (0.0 < extent < math.inf) or lo <= extent <= hi:
+        return 1.0
+    _, e = math.frexp(extent)  # extent = m 2^e, 0.5 <= m < 1
+    return math.ldexp(1.0, XATLAS_TARGET_EXPONENT + 1 - e)
+
+
+def xatlas_options(cfg: LightmapConfig, scale: float = 1.0) -> dict:
+    """xatlas's chart and pack options for a model multiplied by ``scale`` (:func:`xatlas_scale`):
+    the options in model units (``texels_per_unit``, ``max_chart_area``) are converted; the rest
+    are in texels or have no unit. ``scale = 1`` gives the options unchanged."""
     chart = {"max_cost": float(cfg.max_cost), "normal_deviation_weight": float(cfg.normal_deviation_weight)}
     if cfg.max_chart_area > 0:
-        chart["max_chart_area"] = float(cfg.max_chart_area)
+        chart["max_chart_area"] = float(cfg.max_chart_area) * scale * scale
     pack = {"resolution": int(cfg.resolution), "padding": int(cfg.padding), "bilinear": True,
             "rotate_charts": bool(cfg.rotate_charts)}
     if cfg.texels_per_unit > 0:
-        pack["texels_per_unit"] = float(cfg.texels_per_unit)
+        pack["texels_per_unit"] = float(cfg.texels_per_unit) / scale
     return {"chart": chart, "pack": pack}
 
 
 def cache_directory(cfg: LightmapConfig) -> Path | None:
-    """Where atlases are cached: ``cache_dir``, or ``$XDG_CACHE_HOME/scratch-bake/xatlas``
-    (``~/.cache`` when unset); ``"none"`` turns the cache off."""
+    """Where atlases are cached: ``cache_dir`` when it is a path (a cache shared between bakes,
+    the user's choice), else ``.bake-cache/xatlas`` in the output folder (``cfg.out_dir``, set
+    by ``bake run``; without an output folder there is no cache); ``"none"`` turns it off."""
     if cfg.cache_dir.strip().lower() == "none":
         return None
     if cfg.cache_dir:
         return Path(cfg.cache_dir).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "scratch-bake" / "xatlas"
+    return None if cfg.out_dir is None else Path(cfg.out_dir) / CACHE_SUBDIR
 
 
-def _mesh_for_xatlas(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _mesh_for_xatlas(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Used vertices centred on their bounding box (float32 keeps its precision far from the
-    origin), triangle indices into them, and the used vertex ids."""
+    origin) and multiplied by :func:`xatlas_scale`, triangle indices into them, the used vertex
+    ids and the scale."""
     tris = np.asarray(scene.triangles, dtype=np.int64)
     used = np.unique(tris.ravel())
     remap = np.full(scene.n_vertices, -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     p = scene.positions[used]
-    centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
-    return (p - centre).astype(np.float32), remap[tris].astype(np.uint32), used
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    with np.errstate(over="ignore"):
+        scale = xatlas_scale(float((hi - lo).max()))
+    local = p - centre
+    if scale != 1.0:
+        local = local * scale  # exact: a power of two
+    return local.astype(np.float32), remap[tris].astype(np.uint32), used, scale
 
 
 def _run_worker(p32: np.ndarray, idx: np.ndarray, options: dict, timeout: float) -> dict:
@@ -200,14 +240,15 @@ def _cache_load(path: Path | None) -> dict | None:
 
 
 def _cache_store(path: Path | None, data: dict) -> None:
+    """Written like every output (``bake.export.write.write_atomic``: a flushed temporary beside
+    the entry, then a rename; the usual file mode; a temporary left by a killed bake is removed
+    by the next bake into that folder), so a reader never sees half an entry."""
     if path is None:
         return
+    buf = io.BytesIO()
+    np.savez(buf, format=np.str_(CACHE_FORMAT), **{k: data[k] for k in _CACHE_KEYS})
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".part")
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, format=np.str_(CACHE_FORMAT), **{k: data[k] for k in _CACHE_KEYS})
-        os.replace(tmp, path)
+        write_atomic(path, buf.getvalue())
     except OSError:
         pass  # a read-only cache directory only costs speed
 
@@ -218,7 +259,8 @@ def unwrap(scene: Scene, cfg: LightmapConfig, *, cache_dir: Path | None | str = 
     xatlas runs in a subprocess (``WORKER_COMMAND``) with ``cfg.timeout``; a crash, a timeout or
     an xatlas error raises :class:`StageError` saying which. Meshes with more than
     ``cfg.max_triangles`` triangles are refused before xatlas starts. ``cache_dir`` overrides
-    :func:`cache_directory` (``None`` = no cache).
+    :func:`cache_directory` (``None`` = no cache). The cache key is a hash of exactly what xatlas
+    receives (the centred, scaled positions, the indices, the converted options, its version).
     """
     T = scene.n_triangles
     if T == 0:
@@ -227,8 +269,8 @@ def unwrap(scene: Scene, cfg: LightmapConfig, *, cache_dir: Path | None | str = 
         raise StageError(f"lightmap: {T} triangles is more than textures.lightmap.max_triangles = "
                          f"{cfg.max_triangles} (xatlas takes 17-26 s per 100k triangles); simplify the "
                          "mesh (mesh.simplify) or raise the limit", key="textures.lightmap.max_triangles")
-    p32, idx, used = _mesh_for_xatlas(scene)
-    options = xatlas_options(cfg)
+    p32, idx, used, scale = _mesh_for_xatlas(scene)
+    options = xatlas_options(cfg, scale)
     version = xatlas_version()
     h = hashlib.sha256()
     for part in (CACHE_FORMAT, version, json.dumps(options, sort_keys=True)):
@@ -243,10 +285,11 @@ def unwrap(scene: Scene, cfg: LightmapConfig, *, cache_dir: Path | None | str = 
     if data is None:
         data = _run_worker(p32, idx, options, cfg.timeout)
         _cache_store(cpath, data)
-    return _atlas_from(data, scene, used, key, cached, version)
+    return _atlas_from(data, scene, used, key, cached, version, scale)
 
 
-def _atlas_from(data: dict, scene: Scene, used: np.ndarray, key: str, cached: bool, version: str) -> Atlas:
+def _atlas_from(data: dict, scene: Scene, used: np.ndarray, key: str, cached: bool, version: str,
+                scale: float = 1.0) -> Atlas:
     T = scene.n_triangles
     out_idx = np.asarray(data["indices"], dtype=np.int64).reshape(-1, 3)
     vmap = np.asarray(data["vmapping"], dtype=np.int64)
@@ -278,8 +321,8 @@ def _atlas_from(data: dict, scene: Scene, used: np.ndarray, key: str, cached: bo
     util = np.asarray(data["utilization"], dtype=np.float64).ravel()
     return Atlas(width=W, height=H, tri_uvs=tri_uvs, chart=chart.astype(np.int64), key=key,
                  chart_count=int(data["chart_count"]), utilization=float(util[0]) if len(util) else 0.0,
-                 texels_per_unit=float(data["texels_per_unit"]), seconds=float(data["seconds"]),
-                 cached=cached, xatlas_version=version)
+                 texels_per_unit=float(data["texels_per_unit"]) * scale, seconds=float(data["seconds"]),
+                 cached=cached, xatlas_version=version, xatlas_scale=scale)
 
 
 # --------------------------------------------------------------------------------------------

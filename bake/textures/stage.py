@@ -16,7 +16,8 @@ It runs after the mesh is final (triangulate, clean, simplify) and **before ligh
    ``wrap``) and **encode** it (``bake/textures/encode.py``): colour list + size list, TextImage
    string list, PNG costume (``scene.artefacts["costumes"]``: ``[(name, png_bytes)]`` for
    bitmapResolution 2). The record compares all three encodings for every texture.
-4. **Lightmap atlas** (``lightmap.enabled``): xatlas unwrap (subprocess, cached) ->
+4. **Lightmap atlas** (``lightmap.enabled``): xatlas unwrap (subprocess, cached in the output
+   folder's ``.bake-cache/xatlas`` unless ``lightmap.cache_dir`` says otherwise) ->
    ``Scene.tri_lightmap_uvs`` (exported as the ``lightmap uvs`` list) and
    ``scene.artefacts["lightmap"]`` (a ``lightmap.LightmapJob``: atlas + settings) for the lighting
    stage's ``target = "lightmap"`` (``bake.lighting.lightmap.bake_lightmap``); coverage figures in the record.
@@ -303,7 +304,8 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
         return scene
     figs = lightmap.coverage_figures(scene, atlas)
     figs.update({"xatlas_seconds": round(atlas.seconds, 6), "cached": atlas.cached, "key": atlas.key[:16],
-                 "xatlas_version": atlas.xatlas_version, "texels_per_unit": atlas.texels_per_unit})
+                 "xatlas_version": atlas.xatlas_version, "texels_per_unit": atlas.texels_per_unit,
+                 "xatlas_scale": atlas.xatlas_scale})
     if figs["triangles_unmapped"]:
         rec.warn(f"lightmap: xatlas left {figs['triangles_unmapped']} degenerate triangle(s) without UVs "
                  "(they get the texel at UV 0, 0)")

@@ -9,7 +9,9 @@ This file imports only numpy and xatlas (not the ``bake`` package), so it starts
 whatever the working directory.
 
 Input (``IN.npz``): ``positions`` float32 (V, 3), ``indices`` uint32 (T, 3), ``options`` a JSON
-string with ``chart`` and ``pack`` option dicts (xatlas attribute names). Output (``OUT.npz``,
+string with ``chart`` and ``pack`` option dicts (xatlas attribute names). The positions are the
+model centred and multiplied by a power of two (``lightmap.xatlas_scale``), and the options in
+model units converted to match; this script hands both to xatlas as they are. Output (``OUT.npz``,
 written to a temporary name and renamed, so a partial file is never read): ``vmapping`` (V',),
 ``indices`` (T, 3), ``uvs`` (V', 2) normalised to [0, 1], ``width``, ``height``, ``atlas_count``,
 ``chart_count``, ``utilization`` (one per atlas), ``texels_per_unit``, ``seconds``, ``version``.

@@ -5,7 +5,9 @@
   lattice count; every sample lies on its triangle and in its texel;
 * splat / dilate / bilinear: a per-sample loop, scipy's binary dilation, exactness on linear data;
 * xatlas: subprocess results are cached by mesh hash and identical when recomputed; a real
-  xatlas segfault, a hang and a too-large mesh are reported as StageError, never a crash;
+  xatlas segfault, a hang and a too-large mesh are reported as StageError, never a crash; a
+  model 1e-3 or 2^-30 the usual size gets the atlas of an ordinary-sized one (xatlas sees it
+  multiplied by a power of two), ordinary models reach xatlas exactly as before;
 * Cornell box and house: every non-degenerate triangle gets texels, no texel is shared by two
   charts, a smooth closed-form "lighting" comes back from the lightmap within one texel of
   gradient, and seams after stitching differ by <= 2/255;
@@ -284,6 +286,73 @@ def test_failing_worker_message(tmp_path, monkeypatch):
     m = trimesh.creation.box()
     with pytest.raises(StageError, match="xatlas failed: boom"):
         lm.unwrap(make_scene(m.vertices, m.faces), _cfg(tmp_path))
+
+
+# --------------------------------------------------------------------------------------------
+# xatlas works in absolute units: what it is handed
+
+
+def _torus(scale=1.0, shift=0.0):
+    m = trimesh.creation.torus(1.0, 0.4, major_sections=24, minor_sections=12)  # 2.8 across
+    return make_scene(np.asarray(m.vertices, float) * scale + shift, m.faces)
+
+
+def test_xatlas_scale_is_a_power_of_two_outside_the_ordinary_sizes():
+    lo, hi = lm.XATLAS_PLAIN_EXTENTS
+    for e in (lo, 1.5, 2.8, 559.2, hi):
+        assert lm.xatlas_scale(e) == 1.0
+    for e in (0.0, -1.0, float("inf"), float("nan")):
+        assert lm.xatlas_scale(e) == 1.0
+    t = 2.0 ** lm.XATLAS_TARGET_EXPONENT
+    for e in (1e-30, 7.4e-6, 0.0074, 0.5, np.nextafter(lo, 0), np.nextafter(hi, np.inf), 7.4e3, 1e5, 2e30):
+        k = lm.xatlas_scale(e)
+        assert np.log2(k) == round(np.log2(k)) and t <= e * k < 2 * t, e
+    # options in model units are converted; those in texels or without a unit are not
+    cfg = LightmapConfig(texels_per_unit=12.0, max_chart_area=3.0, resolution=128, padding=3)
+    assert lm.xatlas_options(cfg, 1.0) == {
+        "chart": {"max_cost": 2.0, "normal_deviation_weight": 2.0, "max_chart_area": 3.0},
+        "pack": {"resolution": 128, "padding": 3, "bilinear": True, "rotate_charts": True, "texels_per_unit": 12.0}}
+    big = lm.xatlas_options(cfg, 2.0 ** 15)
+    assert big["pack"]["texels_per_unit"] == 12.0 / 2 ** 15 and big["chart"]["max_chart_area"] == 3.0 * 2 ** 30
+    assert {k: v for k, v in big["pack"].items() if k != "texels_per_unit"} == \
+        {k: v for k, v in lm.xatlas_options(cfg)["pack"].items() if k != "texels_per_unit"}
+
+
+def test_ordinary_models_reach_xatlas_exactly_as_before():
+    """A model of ordinary size is handed to xatlas centred in float64, then cast: the bytes (and
+    so the cache key and the atlas) of the unwrap before xatlas_scale existed."""
+    scene = _torus(shift=1e4)
+    p32, idx, used, scale = lm._mesh_for_xatlas(scene)
+    p = scene.positions[used]
+    assert scale == 1.0
+    assert np.array_equal(p32, (p - 0.5 * (p.min(axis=0) + p.max(axis=0))).astype(np.float32))
+
+
+def test_atlas_does_not_depend_on_the_model_units(tmp_path):
+    cfg = _cfg(tmp_path, resolution=64)
+    unit = lm.unwrap(_torus(64.0), cfg)  # 179 across: a size xatlas handles well, given as it is
+    assert unit.xatlas_scale == 1.0 and unit.mapped.all()
+    # 1e-3: xatlas alone called most triangles degenerate (its epsilons are absolute: 14x14 atlas);
+    # now it sees the model at about the size above. Not bit for bit (1e-3 is no power of two, and
+    # the last bits decide some of xatlas's chart growing on this symmetric mesh), but alike.
+    milli = lm.unwrap(_torus(1e-3, shift=5e-3), cfg)
+    assert milli.xatlas_scale == 2.0 ** 16 and milli.mapped.all()
+    for got, ref in ((milli.width, unit.width), (milli.height, unit.height), (milli.chart_count, unit.chart_count)):
+        assert abs(got - ref) <= 0.15 * ref, (got, ref)
+    assert milli.texels_per_unit == pytest.approx(64e3 * unit.texels_per_unit, rel=0.01)  # per model unit
+    # models a power of two apart are the same input to xatlas: one cache entry, the same atlas
+    a = lm.unwrap(_torus(2.0 ** -20), cfg)
+    b = lm.unwrap(_torus(2.0 ** -30), cfg)
+    assert b.cached and b.key == a.key and a.mapped.all()
+    assert np.array_equal(a.tri_uvs, b.tri_uvs) and (a.width, a.height) == (b.width, b.height)
+    assert b.texels_per_unit == a.texels_per_unit * 2 ** 10
+    huge = lm.unwrap(_torus(2.0 ** 40), cfg)
+    assert huge.key == a.key and huge.texels_per_unit == a.texels_per_unit * 2.0 ** -60
+    # texels_per_unit is in model units whatever the size (exact: powers of two)
+    fixed = lm.unwrap(_torus(1e-3), _cfg(tmp_path, resolution=128, texels_per_unit=16e3))
+    assert fixed.texels_per_unit == 16e3 and fixed.mapped.all()
+    h = lm.texel_world_size(_torus(1e-3), fixed)
+    assert np.median(h) == pytest.approx(1 / 16e3, rel=0.1)
 
 
 # --------------------------------------------------------------------------------------------

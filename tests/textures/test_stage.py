@@ -8,7 +8,8 @@
   export stage and a written .sb3 actually contain;
 * the lighting stage picks the textured albedo up, also after it subdivides triangles;
 * the textured corpus models bake to every encoding (and a valid .sb3);
-* a crashing xatlas costs the lightmap, not the bake; reruns give identical bytes.
+* a crashing xatlas costs the lightmap, not the bake; reruns give identical bytes;
+* ``bake run`` keeps the xatlas cache in the output folder (not ~/.cache), out of the manifest.
 """
 
 from __future__ import annotations
@@ -294,6 +295,78 @@ def test_stage_lightmap_outputs_and_crash(tmp_path, monkeypatch):
     assert any("crashed (SIGSEGV)" in w for w in rec2.warnings)
     assert out2.tri_lightmap_uvs is None
     assert [e for e in rec2.effects if e["name"] == "lightmap"][0]["ran"] is False
+
+
+def test_xatlas_cache_directory():
+    from pathlib import Path
+
+    cfg = config_mod.LightmapConfig()
+    assert cfg.cache_dir == "" and lightmap.cache_directory(cfg) is None  # no output folder: no cache
+    cfg.out_dir = Path("out")
+    assert lightmap.cache_directory(cfg) == Path("out/.bake-cache/xatlas")
+    assert lightmap.cache_directory(dataclasses.replace(cfg, cache_dir=" None ")) is None
+    assert lightmap.cache_directory(dataclasses.replace(cfg, cache_dir="/shared/x")) == Path("/shared/x")
+    assert "out_dir" not in config_mod.to_dict(config_mod.Config())["textures"]["lightmap"]  # not a key
+
+
+def test_default_xatlas_cache_stays_in_the_output_folder(tmp_path, monkeypatch, capsys):
+    """``bake run`` caches the atlas in <out>/.bake-cache/xatlas (nothing under ~/.cache or
+    $XDG_CACHE_HOME), written like an output (usual mode, no temporary left), never listed in the
+    manifest or the report's outputs, and kept when the outputs it served are removed as stale."""
+    import json
+    import os
+
+    from bake import cli
+
+    home, xdg = tmp_path / "home", tmp_path / "xdg"
+    home.mkdir()
+    xdg.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(xdg))
+    model = tmp_path / "model"
+    model.mkdir()
+    (model / "m.obj").write_text("v 0 0 0\nv 2 0 0\nv 2 0 2\nv 0 0 2\nv 0 1 0\nv 2 1 0\n"
+                                 "f 1 3 2\nf 1 4 3\nf 1 2 6\nf 1 6 5\n")
+    cfg = model / "bake.toml"
+    cfg.write_text('[input]\npath = "m.obj"\n[textures]\nenabled = true\n'
+                   '[textures.lightmap]\nenabled = true\nresolution = 32\n')
+    out = tmp_path / "out"
+
+    def bake(*extra):
+        assert cli.main(["run", str(cfg), "--out", str(out), "--quiet", *extra]) == 0, capsys.readouterr().err
+        rep = json.loads((out / "report.json").read_text())
+        st = next(s for s in rep["stages"] if s["name"] == "textures")
+        return rep, st["details"].get("lightmap")
+
+    rep, figs = bake()
+    entries = list((out / ".bake-cache" / "xatlas").rglob("*"))
+    files = [p for p in entries if p.is_file()]
+    assert len(files) == 1 and files[0].name.endswith(".npz") and figs["cached"] is False
+    assert files[0].name.startswith(figs["key"])
+    mask = os.umask(0o022)
+    os.umask(mask)
+    assert files[0].stat().st_mode & 0o777 == 0o666 & ~mask
+    assert not list(home.rglob("*")) and not list(xdg.rglob("*"))
+    listed = json.loads((out / ".bake-manifest.json").read_text())["files"]
+    assert "lists/lightmap_uvs.txt" in listed
+    assert not [f for f in [*listed, *rep["outputs"]] if ".bake-cache" in f]
+    # a rerun is served by the cache; the entry is not rewritten
+    stamp = files[0].stat().st_mtime_ns
+    _, figs2 = bake()
+    assert figs2["cached"] is True and figs2["key"] == figs["key"] and files[0].stat().st_mtime_ns == stamp
+    # a temporary left by a killed bake is removed by the next bake into the folder
+    orphan = files[0].parent / f".{files[0].name}.x1y2z3.bake-tmp"
+    orphan.write_bytes(b"half")
+    # without the lightmap its lists are stale and removed; the cache stays
+    rep3, figs3 = bake("--set", "textures.lightmap.enabled=false")
+    assert figs3 is None and "removed" in rep3["outputs"].values()
+    assert files[0].is_file() and not orphan.exists()
+    # an explicit cache_dir is used instead (the user's shared cache); "none" writes nothing
+    shared = tmp_path / "shared"
+    _, figs4 = bake("--set", f'textures.lightmap.cache_dir="{shared}"')
+    assert figs4["cached"] is False and len(list(shared.rglob("*.npz"))) == 1
+    _, figs5 = bake("--set", 'textures.lightmap.cache_dir="none"')
+    assert figs5["cached"] is False and len(list(out.rglob("*.npz"))) == 1 and len(list(shared.rglob("*.npz"))) == 1
 
 
 def test_bake_lightmap_target_end_to_end(tmp_path):

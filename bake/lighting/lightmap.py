@@ -19,7 +19,7 @@ from ..textures.lightmap import LightmapJob, Shader, bake, seam_error
 
 
 def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
-                   samples_per_texel: int = 1) -> tuple[Shader, Callable[[], dict]]:
+                   samples_per_texel: int = 1, albedo=None) -> tuple[Shader, Callable[[], dict]]:
     """A shading function for :func:`bake` built from ``bake/lighting``: at each sample, direct
     light (soft shadows), sky, ambient x AO (the lighting stage's own kernels), plus a final
     gather of bounced light from the lighting stage's per-triangle solution when
@@ -28,6 +28,13 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
     would. Returns (shade, ray_stats); ``shade`` gives shown RGB in [0, 1]: the light alone
     (``output = "light"``, as on a white surface; the engine multiplies its texture) or lit
     albedo (``"color"``).
+
+    ``albedo``: the base colour per triangle, a (T, 4) array or a provider ``Scene -> (T, 4)``
+    (as the lighting stage's ``albedo=``); by default ``scene``'s own base colour, so ``scene``
+    must then be *unlit*: after the lighting stage its vertex colours are lit colours, and
+    ``Scene.triangle_albedo`` would multiply them in again (albedo applied twice and the light of
+    the per-triangle bake multiplied into every texel; :func:`bake_lightmap` passes the unlit
+    albedo, see :func:`scene_albedo`).
     """
     import dataclasses as _dc
 
@@ -39,6 +46,7 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
     from .targets import Points
 
     full = _dc.replace(lighting_cfg, target="triangle", subdivide=False)
+    provider = _provider(albedo)
     k = max(1, int(samples_per_texel))
 
     def per(n: int) -> int:
@@ -49,11 +57,11 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
                       sky=_dc.replace(full.sky, samples=per(full.sky.samples)),
                       bounces=_dc.replace(full.bounces, samples=per(full.bounces.samples)))
     plan = make_plan(scene, cfg)
-    baker = Baker(scene, cfg, plan)
+    baker = Baker(scene, cfg, plan, provider)
     rad = None
     field_baker = None
     if plan.bounces:
-        field_baker = Baker(scene, full, make_plan(scene, full))
+        field_baker = Baker(scene, full, make_plan(scene, full), provider)
         field_baker.run()  # the per-triangle solution the texels gather bounced light from
         ef = field_baker.local_irradiance(field_baker.F.val) + field_baker.F.val["indirect"]
         alb_lin = colmod.decode(field_baker.albedo()[:, :3], cfg.color_space)
@@ -90,14 +98,36 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
     return shade, ray_stats
 
 
+def _provider(albedo):
+    """An albedo override for :class:`bake.lighting.stage.Baker`: ``None``, a provider, or a
+    fixed (T, 4) array (wrapped; checked against the scene's triangle count when used)."""
+    if albedo is None or callable(albedo):
+        return albedo
+    arr = np.asarray(albedo, dtype=np.float64)
+    return lambda _scene: arr
 
-def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap") -> tuple[Scene, dict]:
+
+def scene_albedo(scene: Scene):
+    """The unlit albedo for shading ``scene``'s texels: the one the lighting stage used when
+    ``scene`` is its output (``LightingResult.albedo``, same triangles), else ``None`` (the
+    scene's own base colour)."""
+    from .stage import LightingResult
+
+    res = scene.artefacts.get("lighting")
+    if isinstance(res, LightingResult) and res.albedo is not None and len(res.albedo) == scene.n_triangles:
+        return res.albedo
+    return None
+
+
+def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=None) -> tuple[Scene, dict]:
     """``lighting.target = "lightmap"``: light every texel of the textures stage's atlas with the
     lighting stage's kernels (:func:`light_function`, ``lighting.vertex_output`` = "light" or
     "color"), then splat, dilate and stitch (:func:`bake`). The image (RGBA uint8, opaque) goes
     to ``scene.artefacts["lightmap_image"]`` and out in the same encodings as the material
     textures (``textures.encodings``; names from the textures ``*_name`` keys with
-    ``{material}`` = ``name``). Returns (scene, figures for the lighting record)."""
+    ``{material}`` = ``name``). ``albedo`` as for :func:`light_function`; by default the unlit
+    albedo the lighting stage recorded when ``scene`` is its output (:func:`scene_albedo`).
+    Returns (scene, figures for the lighting record)."""
     from ..textures.encode import ENCODINGS, encode_texture
 
     job = scene.artefacts.get("lightmap")
@@ -111,8 +141,10 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap") -> tupl
                          "lighting.subdivide must be off for lightmaps)", key="lighting.subdivide")
     t0 = time.perf_counter()
     output = "light" if getattr(lighting_cfg, "vertex_output", "color") == "light" else "color"
+    if albedo is None:
+        albedo = scene_albedo(scene)
     shade, ray_stats = light_function(scene, lighting_cfg, output=output,
-                                      samples_per_texel=job.config.supersample ** 2)
+                                      samples_per_texel=job.config.supersample ** 2, albedo=albedo)
     res = bake(scene, job.atlas, shade, job.config)
     rgb = np.clip(res.image[:, :, :3], 0.0, 1.0)
     img8 = np.concatenate([np.rint(rgb * 255.0).astype(np.uint8),

@@ -54,6 +54,10 @@ class LightingResult:
     face: dict[str, np.ndarray] = field(default_factory=dict)  # component -> (T,) or (T, 3)
     vertex_se: dict[str, np.ndarray] = field(default_factory=dict)  # component -> (V,)
     face_se: dict[str, np.ndarray] = field(default_factory=dict)  # component -> (T,)
+    # (T, 4) the unlit base colour the bake multiplied (shown values, as colmod.triangle_albedo):
+    # the lit scene's vertex colours are albedo x light, so a later shading of the same
+    # triangles (the lightmap target) must take its albedo from here, not from the lit scene
+    albedo: np.ndarray | None = None
 
 
 COMPONENTS = {"direct": 3, "sky": 3, "ao": 1, "indirect": 3}
@@ -380,7 +384,7 @@ class Baker:
             face_sampled=self.f_done.copy(),
             vertex={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.V.val.items()},
             face={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.F.val.items()},
-            vertex_se=dict(self.V.se), face_se=dict(self.F.se))
+            vertex_se=dict(self.V.se), face_se=dict(self.F.se), albedo=alb.copy())
         out = self.current_scene().replace(vertex_colors=vertex_colors, face_colors=face_colors)
         return out.with_artefact("lighting", res)
 
@@ -453,7 +457,9 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
         # per-triangle colours above (a fallback for flat fillers), then every texel of the atlas
         from .lightmap import bake_lightmap
 
-        out, lightmap_figs = bake_lightmap(out, cfg)
+        # the albedo of the unlit input: ``out`` carries lit vertex colours, which
+        # Scene.triangle_albedo would multiply into the texels a second time
+        out, lightmap_figs = bake_lightmap(out, cfg, albedo=baker.albedo())
         rec.effects.append({"name": "lightmap", "ran": True, "reason": "lighting.target = 'lightmap'",
                             "rays": int(sum(v["rays"] for v in lightmap_figs["rays"].values())),
                             "seconds": lightmap_figs["seconds"]})

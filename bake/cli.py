@@ -3,6 +3,9 @@
     bake run MODEL|CONFIG.toml [--set key=value ...] [--out DIR] [--depfile FILE] [--strict] [--quiet]
     bake demo [--out DIR]
     bake inspect MODEL [--set key=value ...] [--json]
+    bake report OUT_DIR [--width N]
+    bake check PROJECT.sb3 [--json] [--strict]
+    bake sweep MODEL|CONFIG --vary KEY=V1,V2,... [--out DIR]
     bake keys
 
 Exit statuses: see bake/errors.py (0 ok, 1 internal error, 2 config/usage, 3 bad input,
@@ -20,7 +23,7 @@ from typing import Any, Callable
 
 from . import __version__
 from . import config as config_mod
-from .errors import BakeError, InputError, LimitError
+from .errors import BakeError, ConfigError, InputError, LimitError
 
 
 # --------------------------------------------------------------------------- progress
@@ -59,6 +62,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     from .export import output, report
 
     prog = _Progress(quiet)
+    cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
     try:
         result = pipeline.run(cfg, progress=prog)
     finally:
@@ -67,7 +71,8 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     if not quiet:
         for line in report.summary_lines(rep):
             print(line)
-        print(f"  wrote {out}/ (report.md, report.json, lists)")
+        extra = ", report.html" if cfg.report.html else ""
+        print(f"  wrote {out}/ (report.md, report.json{extra}, lists)")
     if strict or cfg.report.strict:
         bad = [lim for lim in rep["limits"] if not lim["ok"]]
         if bad:
@@ -161,17 +166,21 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.reference is not None:
         rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}")
         reference = rvals[0]
-    out = Path(args.out) if args.out else Path("bake-out") / f"sweep-{target.stem}-{key}"
+    out_dir = Path(args.out) if args.out else _default_out(target)
+    out = out_dir / "sweeps" / key
     table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out)
+    html_written = False
+    if (out_dir / "report.json").is_file() and cfg.report.html:  # show it in the bake's report
+        from .export import html
+
+        w = cfg.report.preview_width
+        html.write(out_dir, width=w, height=max(1, w * 3 // 4))
+        html_written = True
     if not args.quiet:
-        print(f"sweep {key} on {target.name} (reference: {table['reference']})")
-        print(f"  {'value':>10} {'seconds':>9} {'rmse':>10} {'max error':>10}")
-        for r in table["rows"]:
-            print(f"  {r['value']:>10} {r['seconds']:>9.3f} {r.get('rmse', float('nan')):>10.5f} "
-                  f"{r.get('max_error', float('nan')):>10.5f}")
-        if table.get("slope") is not None:
-            print(f"  log-log slope of error against value: {table['slope']:.2f}")
-        print(f"  wrote {out}.json and {out}.png")
+        for line in sweep_mod.summary_lines(table):
+            print(line)
+        print(f"  wrote {out}.json and {out}.png" + (f"; updated {out_dir / 'report.html'}" if html_written else
+                                                     f" (bake into {out_dir} and its report.html shows them)"))
     return 0
 
 
@@ -190,6 +199,27 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.strict and any(not lim["ok"] for lim in rep["limits"]):
         bad = [lim for lim in rep["limits"] if not lim["ok"]][0]
         raise LimitError(f"limit exceeded: {bad['name']} = {bad['value']} > {bad['limit']}", path=target)
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from .export import html
+
+    out = Path(args.out_dir)
+    if not out.is_dir():
+        raise InputError("not a folder (give the output folder of a bake)", path=out)
+    w = args.width
+    if not 16 <= w <= 2048:
+        raise ConfigError(f"--width must be between 16 and 2048, got {w}")
+    info = html.write(out, width=w, height=max(1, w * 3 // 4))
+    if not args.quiet:
+        for v in info["views"]:
+            print(f"  {v['name']:<12} {v['wrong_pixels']:>7} wrong pixels of {v['covered_pixels']:>7} "
+                  f"({v['order']})")
+        for t in info["textures"]:
+            print(f"  texture {t['name']}: {', '.join(t['encodings'])} "
+                  f"({'identical' if t['agree'] else 'DIFFERENT'})")
+        print(f"  wrote {out / html.HTML_NAME} ({info['images']} images, {len(info['sweeps'])} sweeps)")
     return 0
 
 
@@ -237,13 +267,14 @@ def build_parser() -> argparse.ArgumentParser:
     common(i)
     i.set_defaults(func=cmd_inspect)
 
-    sw = sub.add_parser("sweep", help="bake at several values of one numeric key: seconds and error vs a reference")
+    sw = sub.add_parser("sweep", help="bake at several values of any numeric key: error and bytes against seconds")
     sw.add_argument("target", help="a model or a config (.toml)")
     sw.add_argument("--vary", required=True, metavar="KEY=V1,V2,...",
                     help="e.g. lighting.ao.samples=16,64,256,1024")
     sw.add_argument("--reference", metavar="VALUE", help="compare against a bake at this value "
                     "(default: the highest value swept)")
-    sw.add_argument("--out", help="output path without suffix (writes .json and .png)")
+    sw.add_argument("--out", help="the bake's output folder (default: bake-out/<name>); writes "
+                    "OUT/sweeps/KEY.json and .png, shown by OUT/report.html")
     common(sw)
     sw.set_defaults(func=cmd_sweep)
 
@@ -253,6 +284,13 @@ def build_parser() -> argparse.ArgumentParser:
     ck.add_argument("--strict", action="store_true", help="exit 4 if a limit is exceeded")
     ck.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show Python tracebacks")
     ck.set_defaults(func=cmd_check)
+
+    rp = sub.add_parser("report", help="re-render report.html of a finished bake (no baking)")
+    rp.add_argument("out_dir", help="the output folder of a bake (has report.json and lists.json)")
+    rp.add_argument("--width", type=int, default=320, help="preview width in pixels (default 320)")
+    rp.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    rp.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show Python tracebacks")
+    rp.set_defaults(func=cmd_report)
 
     k = sub.add_parser("keys", help="list every config key with its default")
     k.set_defaults(func=cmd_keys, set=[], quiet=False)

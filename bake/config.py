@@ -252,7 +252,11 @@ class LightmapConfig:
     stitch_seams: bool = True
     max_triangles: int = 100000  # larger meshes are refused (xatlas takes 17-26 s at 100k)
     timeout: float = 120.0  # seconds the xatlas subprocess may run
-    cache_dir: str = ""  # "" = ~/.cache/scratch-bake/xatlas (XDG_CACHE_HOME); "none" = no cache
+    # xatlas atlas cache: "" = <output folder>/.bake-cache/xatlas (nothing outside the output
+    # folder; no cache without one); a path = a cache shared between bakes; "none" = no cache.
+    cache_dir: str = ""
+    # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
+    out_dir: Path | None = field(default=None, metadata={"internal": True})
 
 
 @dataclass
@@ -347,6 +351,8 @@ class ExportConfig:
 @dataclass
 class ReportConfig:
     strict: bool = False  # an exceeded limit makes the bake exit non-zero
+    html: bool = True  # write report.html (previews, limit bars, stage table, sweeps)
+    preview_width: int = 320  # pixels per preview image (height is 3/4 of it)
 
 
 @dataclass
@@ -602,6 +608,7 @@ def validate(cfg: Config) -> None:
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
     need(cfg.mesh.clean.weld_tolerance >= 0, "mesh.clean.weld_tolerance", "must be >= 0")
     need(1 <= cfg.export.precision <= 15, "export.precision", "must be between 1 and 15")
+    need(16 <= cfg.report.preview_width <= 2048, "report.preview_width", "must be between 16 and 2048")
     s = cfg.mesh.simplify
     need(s.target_triangles >= 0, "mesh.simplify.target_triangles", "must be >= 0")
     need(0 <= s.target_ratio <= 1, "mesh.simplify.target_ratio", "must be between 0 and 1")

@@ -96,8 +96,10 @@ Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done")
 
 
 def run(cfg: Config, *, progress: Progress | None = None, until: str | None = None,
-        scene: Scene | None = None) -> BakeResult:
-    """Run every stage the config calls for. ``until`` stops after the named stage."""
+        scene: Scene | None = None, observe: Callable[[str, Scene], None] | None = None) -> BakeResult:
+    """Run every stage the config calls for. ``until`` stops after the named stage; ``observe``
+    is called with each stage's name and output scene (``bake sweep`` compares the lighting
+    stage's colours before later stages split triangles)."""
     t0 = time.perf_counter()
     records: list[StageRecord] = []
     skipped: list[dict[str, Any]] = []
@@ -130,6 +132,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         if not rec.counts_out:
             rec.counts_out = counts(scene)
         records.append(rec)
+        if observe is not None:
+            observe(spec.name, scene)
         if progress:
             progress(spec.name, "done")
         if until == spec.name:

@@ -246,19 +246,25 @@ def _clip_near(cam: np.ndarray, near: float) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(out), np.concatenate(own)
 
 
+def headlight(tri: np.ndarray, camera: Camera) -> np.ndarray:
+    """(T,) brightness 0.35 + 0.65 |cos| of the angle between each triangle's normal and the view
+    direction: a directional light from the camera, so the pieces of a split face match."""
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    d = np.asarray(camera.position, np.float64) - np.asarray(camera.look_at, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.abs(n @ d) / (np.linalg.norm(n, axis=1) * np.linalg.norm(d))
+    return 0.35 + 0.65 * np.nan_to_num(c)
+
+
 def render_scene(scene, camera: Camera, *, mode: str = "zbuffer", order: np.ndarray | None = None,
                  colors: np.ndarray | None = None, shade: bool = False, cull: bool = True,
                  background=(1.0, 1.0, 1.0)) -> Image:
     """Render a Scene: its triangles in their base colours (``scene.triangle_albedo()``, or
     ``colors``), back faces culled by material sidedness. ``shade`` darkens faces turned away
-    from the camera (a headlight), which makes flat-coloured previews readable."""
+    from the camera (:func:`headlight`), which makes flat-coloured previews readable."""
     tri = scene_triangles(scene)
     col = np.asarray(scene.triangle_albedo() if colors is None else colors, np.float64)[:, :3]
     if shade and len(tri):
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        v = np.asarray(camera.position, np.float64) - tri.mean(1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            c = np.abs(np.einsum("ij,ij->i", n, v)) / (np.linalg.norm(n, axis=1) * np.linalg.norm(v, axis=1))
-        col = col * (0.35 + 0.65 * np.nan_to_num(c))[:, None]
+        col = col * headlight(tri, camera)[:, None]
     return render(camera, tri, col, mode=mode, order=order, two_sided=scene_two_sided(scene), cull=cull,
                   background=background)

@@ -1,19 +1,29 @@
 """Accuracy against time: bake at several values of one numeric config key and compare.
 
-``bake sweep CONFIG --vary lighting.ao.samples=16,64,256,1024`` runs the pipeline (up to and
-including the lighting stage) once per value and writes a table, as JSON and as a PNG plot:
-seconds, rays, RMSE and max error of the colours Scratch will show (vertex and triangle colours,
-0..1) and of the linear irradiance, each against the highest value (or an explicit reference
-run), next to the error the stage itself estimated from its samples.
+``bake sweep MODEL --vary KEY=V1,V2,...`` runs the whole pipeline once per value of any numeric
+key of any stage (simplify targets, BSP candidates, BVH bins, AO and shadow samples, lightmap
+resolution, ...) and writes a table, as JSON and as a PNG plot of error and bytes against
+seconds, into ``OUT/sweeps/<key>.json|png`` where ``bake report OUT`` shows it. One untimed
+warm-up bake of the first value runs before the timed ones, so loading libraries is not charged
+to the first row.
+
+Every row has: the seconds of the stage(s) the key belongs to and of the whole bake, the bytes
+the lists add to project.json, the triangles written, the stage's own accuracy figures, and the
+*image error*: RMSE (0..1) of depth-buffer previews rendered from the written lists (what Scratch
+will show) against the reference run's, from the same cameras. The plotted ``error`` is the
+figure that measures the key's trade-off: Hausdorff distance for simplify, shown-colour RMSE
+against the reference for lighting (as before, with each effect's actual error next to the
+stage's own estimate), the split inflation for BSP, the SAH cost for BVH, the image error
+otherwise (lightmap resolution, textures).
 
 API::
 
     table = sweep("bake.toml", "lighting.ao.samples", [16, 64, 256], reference=4096,
-                  out="sweep_ao")           # writes sweep_ao.json and sweep_ao.png
-    key, values = parse_vary("lighting.ao.samples=16,64,256")
+                  out="bake-out/model/sweeps/lighting.ao.samples")   # writes .json and .png
+    key, values = parse_vary("mesh.simplify.target_ratio=0.02,0.1,0.5")
 
-``scene=`` bakes a given :class:`~bake.scene.Scene` with the lighting stage alone (no import),
-for tests and for sweeping before a model is on disk.
+``scene=`` bakes a given :class:`~bake.scene.Scene` with the lighting stage alone (no import,
+no export: lighting keys only), for tests and for sweeping before a model is on disk.
 """
 
 from __future__ import annotations
@@ -23,6 +33,7 @@ import io
 import json
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -33,6 +44,34 @@ from .export.write import write_atomic
 from .config import Config
 from .errors import ConfigError
 from .scene import Scene
+
+# the pipeline stage(s) whose seconds a key's sweep reports, by key prefix (first match)
+STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
+                 ("mesh.triangulate.", ("triangulate",)), ("textures.lightmap.", ("textures", "lighting")),
+                 ("textures.", ("textures",)), ("lighting.", ("lighting",)), ("bsp.", ("bsp",)),
+                 ("bvh.", ("bvh",)), ("export.", ("export",)), ("transform.", ("transform",)),
+                 ("import.", ("import",)))
+# the figure plotted as "error" per stage: (row key, label); others use the image error
+ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
+                  "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
+                  "bsp": ("inflation", "triangles added by splits (fraction of the input)"),
+                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)")}
+IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1)")
+PREVIEW_SIZE = (160, 120)
+
+
+def stages_for(key: str) -> tuple[str, ...]:
+    for prefix, stages in STAGES_OF_KEY:
+        if key.startswith(prefix):
+            return stages
+    return ()
+
+
+def error_of(key: str) -> tuple[str, str]:
+    st = stages_for(key)
+    if key.startswith("textures.lightmap."):
+        return IMAGE_ERROR
+    return ERROR_OF_STAGE.get(st[0], IMAGE_ERROR) if st else IMAGE_ERROR
 
 
 def parse_vary(text: str) -> tuple[str, list[float]]:
@@ -79,22 +118,81 @@ def _with_value(cfg: Config, key: str, value: Any) -> Config:
     return c
 
 
-def _bake(cfg: Config, scene: Scene | None) -> tuple[Scene, dict, float]:
-    """Run up to the lighting stage. Returns (scene, lighting record as JSON, total seconds)."""
+@dataclass
+class _Run:
+    scene: Scene
+    records: dict[str, dict]  # stage name -> record JSON
+    seconds: float  # the key's stage(s)
+    total: float
+    lists: dict | None = None  # what the export wrote (lists.json), None without export
+    report: dict | None = None  # report.json's shape (config, materials) for the previews
+    final: Scene | None = None  # the scene after the last stage (else ``scene``)
+
+
+def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
+    """One bake: the lighting stage alone on ``scene``, or the whole pipeline."""
     t0 = time.perf_counter()
     if scene is not None:
         from .lighting.stage import stage
 
+        if not key.startswith("lighting."):
+            raise ConfigError("sweeping a given scene supports lighting keys only", key=key)
         out, rec = stage(scene, cfg.lighting)
-        return out, rec.to_json(), time.perf_counter() - t0
+        r = rec.to_json()
+        return _Run(out, {"lighting": r}, r["seconds"], time.perf_counter() - t0)
+    from .export import report as report_mod
     from .pipeline import run
 
-    res = run(cfg, until="lighting")
-    recs = [r for r in res.records if r.name == "lighting"]
-    if not recs:
-        raise ConfigError("the lighting stage did not run (set lighting.enabled = true)",
-                          key="lighting.enabled")
-    return res.scene, recs[0].to_json(), time.perf_counter() - t0
+    seen: dict[str, Scene] = {}
+    res = run(cfg, observe=lambda name, sc: seen.__setitem__(name, sc) if name == "lighting" else None)
+    total = time.perf_counter() - t0
+    recs = {r.name: r.to_json() for r in res.records}
+    stages = stages_for(key)
+    ran = [n for n in stages if n in recs]
+    if stages and not ran:
+        section = key.rsplit(".", 1)[0]
+        raise ConfigError(f"the {stages[0]} stage did not run, so this key changes nothing "
+                          f"(set {section.split('.')[0] if stages[0] == 'lighting' else section}.enabled = true)",
+                          key=key)
+    lists = None
+    outputs = res.scene.artefacts.get("outputs", {})
+    if cfg.export.json_name in outputs:
+        lists = json.loads(outputs[cfg.export.json_name]).get("lists", {})
+    # the lighting stage's scene: its colours line up with the lighting artefact (a BSP splits later)
+    return _Run(seen.get("lighting", res.scene), recs, sum(recs[n]["seconds"] for n in ran) if ran else total,
+                total, lists, report_mod.build(res), final=res.scene)
+
+
+def _mesh(run: _Run):
+    """The mesh as the export wrote it (lists.json), for previews; None without export."""
+    if run.lists is None or run.report is None:
+        return None
+    from .export import html, preview
+
+    textures = html.decoded_textures(run.lists, run.report, {})
+    lm = next((t for t in textures if t["name"] == "lightmap"), None)
+    lm_img = None if lm is None else next(iter(lm["images"].values()))[..., :3].astype(np.float64) / 255.0
+    mesh = preview.mesh_from_lists(run.lists, run.report, lightmap=lm_img)
+    return mesh if mesh is not None and len(mesh.tris) else None
+
+
+def _previews(mesh, cams) -> list[np.ndarray] | None:
+    """Depth-buffer previews of a written mesh from the given cameras (uint8 RGB)."""
+    if mesh is None or cams is None:
+        return None
+    from .export import preview
+    from .render import render
+
+    two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
+    return [preview.shade(mesh, cam, render(cam, mesh.corners, mode="zbuffer", two_sided=two))
+            for _, cam in cams]
+
+
+def _image_rmse(a: list[np.ndarray] | None, b: list[np.ndarray] | None) -> float | None:
+    if a is None or b is None:
+        return None
+    d = np.concatenate([(x.astype(np.float64) - y.astype(np.float64)).ravel() / 255.0 for x, y in zip(a, b)])
+    return float(np.sqrt(np.mean(d * d))) if len(d) else None
 
 
 def _colors(s: Scene) -> dict[str, np.ndarray | None]:
@@ -160,55 +258,99 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     """Bake once per value of ``key`` and compare each bake with a reference.
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
-    value (not a row); a :class:`Scene` = a bake made elsewhere. ``out`` (a path without suffix)
-    writes ``out.json`` and ``out.png``. Returns the table (JSON-serialisable)."""
+    value (not a row); a :class:`Scene` = a lighting bake made elsewhere. ``out`` (a path without
+    suffix) writes ``out.json`` and ``out.png``. Returns the table (JSON-serialisable)."""
     base = _load(config)
     config_mod.get_key(base, key)  # unknown key -> ConfigError
+    if not stages_for(key):
+        raise ConfigError("does not change what is baked (sweep varies keys of the pipeline's stages)", key=key)
     vals = sorted(dict.fromkeys(values), key=float)
     if not vals:
         raise ConfigError("sweep needs at least one value", key=key)
-    rows = []
-    runs = {}
-    for v in vals:  # one bake per value
-        c = _with_value(base, key, v)
-        s, rec, total = _bake(c, scene)
-        runs[v] = _colors(s)
-        rows.append(_row(v, rec, total))
+    if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
+        _bake(_with_value(base, key, vals[0]), scene, key)
+    runs = {v: _bake(_with_value(base, key, v), scene, key) for v in vals}  # one bake per value
     ref_desc: dict[str, Any]
+    ref_run: _Run | None = None
     if reference is None:
-        ref_v = vals[-1]
-        ref = runs[ref_v]
-        ref_desc = {"kind": "highest value", "value": ref_v}
+        ref_run = runs[vals[-1]]
+        ref_desc = {"kind": "highest value", "value": vals[-1]}
     elif isinstance(reference, Scene):
-        ref = _colors(reference)
         ref_desc = {"kind": "scene"}
     else:
-        c = _with_value(base, key, reference)
-        s, rec, total = _bake(c, scene)
-        ref = _colors(s)
-        ref_desc = {"kind": "reference run", "value": reference, "seconds": rec["seconds"],
-                    "total_seconds": round(total, 6)}
-    for row, v in zip(rows, vals):
-        row.update(compare(runs[v], ref))
+        ref_run = _bake(_with_value(base, key, reference), scene, key)
+        ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
+                    "total_seconds": round(ref_run.total, 6)}
+    ref_colors = _colors(reference if isinstance(reference, Scene) else ref_run.scene)
+    ref_mesh = _mesh(ref_run) if ref_run is not None else None
+    cams = None
+    if ref_mesh is not None:
+        from .export.preview import cameras
+
+        cams = cameras(ref_mesh.verts, *PREVIEW_SIZE)
+    ref_images = _previews(ref_mesh, cams)
+    rows = []
+    for v in vals:
+        run = runs[v]
+        row = _row(v, run, key)
+        if key.startswith("lighting."):  # the same vertices in every run: compare them
+            row.update(compare(_colors(run.scene), ref_colors))
+        row["image_rmse"] = _image_rmse(_previews(_mesh(run), cams), ref_images)
         row["reference"] = reference is None and v == vals[-1]
-    table = {"key": key, "values": list(vals), "reference": ref_desc, "rows": rows,
-             "slope": _slope(rows), "metric": "RMSE / max error of shown colours (0..1, RGB) over "
-                                               "traced vertices (or triangles); irradiance is linear"}
+        err_key = error_of(key)[0]
+        row["error"] = row.get(err_key, row["accuracy"].get(err_key))
+        rows.append(row)
+    err_key, err_label = error_of(key)
+    table = {"key": key, "values": list(vals), "stages": list(stages_for(key)), "reference": ref_desc,
+             "rows": rows, "error_metric": err_label, "error_key": err_key, "slope": _slope(rows),
+             "metric": "error: " + err_label + "; image_rmse: depth-buffer previews of the written lists "
+                       f"({PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, 3 views) against the reference's; rmse / max "
+                       "error of shown colours (0..1, RGB) over traced vertices (or triangles); irradiance is linear"}
     if out is not None:
         write(table, out)
     return table
 
 
-def _row(v: Any, rec: dict, total: float) -> dict[str, Any]:
-    effects = [e for e in rec.get("effects", []) if e.get("ran")]
+def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
+    effects = [e for r in run.records.values() for e in r.get("effects", []) if e.get("ran")]
+    accuracy: dict[str, Any] = {}
+    for name in stages_for(key) or tuple(run.records):
+        for k, x in run.records.get(name, {}).get("accuracy", {}).items():
+            if isinstance(x, (int, float)) and not isinstance(x, bool):
+                accuracy[k] = x
+    last = run.final if run.final is not None else run.scene
+    info = last.artefacts.get("list_info", {})
+    costumes = last.artefacts.get("costumes", [])
     return {
         "value": v,
-        "seconds": rec.get("seconds"),
-        "total_seconds": round(total, 6),
+        "seconds": round(run.seconds, 6),
+        "total_seconds": round(run.total, 6),
+        "stage_seconds": {n: r["seconds"] for n, r in run.records.items()},
+        "triangles": int(last.n_triangles),
+        "bytes": int(sum(i["project_json_bytes"] for i in info.values())) if info else None,
+        "asset_bytes": int(sum(len(c[1]) for c in costumes)) if costumes else 0,
+        "accuracy": accuracy,
         "rays": int(sum(e.get("rays", 0) or 0 for e in effects)),
         "reported_error": {e["name"]: e["error"] for e in effects if "error" in e},
         "effect_seconds": {e["name"]: e.get("seconds") for e in effects},
     }
+
+
+def summary_lines(table: dict) -> list[str]:
+    """The sweep as a terminal table."""
+    lines = [f"sweep {table['key']} (reference: {table['reference']}); error = {table['error_metric']}",
+             f"  {'value':>10} {'stage s':>9} {'total s':>9} {'error':>11} {'image err':>10} {'bytes':>10} "
+             f"{'triangles':>10}"]
+
+    def num(v, fmt):
+        return format(v, fmt) if isinstance(v, (int, float)) else "-"
+    for r in table["rows"]:
+        lines.append(f"  {r['value']:>10} {num(r['seconds'], '9.3f')} {num(r['total_seconds'], '9.3f')} "
+                     f"{num(r.get('error'), '11.5g')} {num(r.get('image_rmse'), '10.5f')} "
+                     f"{num(r.get('bytes'), '10d')} {num(r.get('triangles'), '10d')}")
+    if table.get("slope") is not None:
+        lines.append(f"  log-log slope of the colour error against the value: {table['slope']:.2f}")
+    return lines
 
 
 def _slope(rows: list[dict]) -> float | None:
@@ -253,54 +395,77 @@ def _component(effect: str) -> str:
 
 
 def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
-    """Three panels: shown-colour error, each component's error next to the stage's own estimate
-    (same units), and seconds."""
+    """Three panels: the key's error against seconds, list bytes against seconds (each point
+    labelled with its value), and the errors against the value (for lighting keys each effect's
+    actual error next to the stage's own estimate, in the same units)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = [r for r in table["rows"] if not r.get("reference")]
+    rows = table["rows"]
+    key = table["key"]
+    secs = np.array([float(r["seconds"]) for r in rows])
     x = np.array([float(r["value"]) for r in rows])
     fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(14, 4))
 
-    def series(values):
-        y = np.array([v if v is not None else np.nan for v in values], dtype=float)
-        return np.isfinite(y) & (y > 0) & (x > 0), y
+    def series(values, xs=x):
+        y = np.array([v if isinstance(v, (int, float)) and v is not None else np.nan for v in values], float)
+        return np.isfinite(y) & (y > 0) & np.isfinite(xs), y
 
-    for name, label, style in (("rmse", "RMSE vertex colour", "o-"), ("max_error", "max error", "s--"),
-                               ("face_rmse", "RMSE triangle colour", "^-")):
-        ok, y = series([r.get(name) for r in rows])
-        if ok.any():
-            ax1.loglog(x[ok], y[ok], style, label=label)
-    ok, y = series([r.get("rmse") for r in rows])
+    def labelled(ax, xs, ys, ok, style, label):
+        ax.plot(xs[ok], ys[ok], style, label=label)
+        for xi, yi, r in zip(xs[ok], ys[ok], [r for r, k in zip(rows, ok) if k]):
+            ax.annotate(f"{r['value']:g}" if isinstance(r["value"], (int, float)) else str(r["value"]), (xi, yi),
+                        textcoords="offset points", xytext=(4, 4), fontsize=7)
+
+    ok, y = series([r.get("error") for r in rows], secs)
     if ok.any():
-        i = int(np.flatnonzero(ok)[0])
-        ax1.loglog(x, y[i] * (x / x[i]) ** -0.5, color="grey", lw=0.8, label="slope -1/2")
-    ax1.set_title("shown colours (0..1) vs " + str(table["reference"].get("kind")), fontsize=9)
-    effects = sorted({e for r in rows for e in r["reported_error"]})
-    for k, eff in enumerate(effects):
-        comp = _component(eff)
-        col = f"C{k}"
-        ok, y = series([r.get("components", {}).get(comp, {}).get("rmse") for r in rows])
-        if ok.any():
-            ax2.loglog(x[ok], y[ok], "o-", color=col, label=f"{comp}: actual RMSE")
-        ok, y = series([r["reported_error"].get(eff) for r in rows])
-        if ok.any():
-            ax2.loglog(x[ok], y[ok], "x:", color=col, label=f"{eff}: stage's estimate")
-    ax2.set_title("per effect (irradiance / AO units)", fontsize=9)
-    xs = np.array([float(r["value"]) for r in table["rows"]])
-    ax3.plot(xs, [r["seconds"] for r in table["rows"]], "o-", label="lighting stage")
-    ax3.plot(xs, [r["total_seconds"] for r in table["rows"]], "s--", label="total")
-    if (xs > 0).all():
-        ax3.set_xscale("log")
-    ax3.set_ylabel("seconds")
+        labelled(ax1, secs, y, ok, "o-", table.get("error_key", "error"))
+        if (y[ok] > 0).all() and y[ok].max() > 20 * y[ok].min():
+            ax1.set_yscale("log")
+    ok2, y2 = series([r.get("image_rmse") for r in rows], secs)
+    if ok2.any() and table.get("error_key") != "image_rmse":
+        labelled(ax1, secs, y2, ok2, "s--", "image_rmse")
+    ax1.set_xlabel(f"seconds ({'+'.join(table.get('stages') or ['stage'])})")
+    ax1.set_ylabel("error")
+    ax1.set_title(f"{table.get('error_metric', 'error')}", fontsize=9)
+    ok, y = series([r.get("bytes") for r in rows], secs)
+    if ok.any():
+        labelled(ax2, secs, y, ok, "o-", "list bytes in project.json")
+    ax2.set_xlabel("seconds")
+    ax2.set_ylabel("bytes")
+    ax2.set_title("what it costs in project.json", fontsize=9)
+    if key.startswith("lighting."):
+        for name, label, style in (("rmse", "RMSE vertex colour", "o-"), ("max_error", "max error", "s--"),
+                                   ("face_rmse", "RMSE triangle colour", "^-")):
+            ok, y = series([r.get(name) for r in rows])
+            if ok.any():
+                ax3.loglog(x[ok], y[ok], style, label=label)
+        effects = sorted({e for r in rows for e in r["reported_error"]})
+        for k, eff in enumerate(effects):
+            comp = _component(eff)
+            ok, y = series([r.get("components", {}).get(comp, {}).get("rmse") for r in rows])
+            if ok.any():
+                ax3.loglog(x[ok], y[ok], "o-", color=f"C{k + 3}", label=f"{comp}: actual RMSE")
+            ok, y = series([r["reported_error"].get(eff) for r in rows])
+            if ok.any():
+                ax3.loglog(x[ok], y[ok], "x:", color=f"C{k + 3}", label=f"{eff}: stage's estimate")
+        ax3.set_title("per effect, against " + str(table["reference"].get("kind")), fontsize=9)
+    else:
+        for name, style in (("error", "o-"), ("image_rmse", "s--")):
+            ok, y = series([r.get(name) for r in rows])
+            if ok.any():
+                ax3.plot(x[ok], y[ok], style, label=name)
+        if (x > 0).all() and x.max() > 20 * x.min():
+            ax3.set_xscale("log")
+        ax3.set_title("errors against the value", fontsize=9)
+    ax3.set_xlabel(key)
     for ax in (ax1, ax2, ax3):
-        ax.set_xlabel(table["key"])
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
-    ax1.set_ylabel("error")
+    fig.suptitle(f"bake sweep {key}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png", metadata={"Software": None})
     plt.close(fig)

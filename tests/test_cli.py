@@ -134,14 +134,21 @@ def test_sweep_command_writes_table_and_plot(tmp_path, capsys):
     from bake.cli import sample_config_path
     model = sample_config_path().with_name("demo_scene.obj")
     out = tmp_path / "sw"
-    code, stdout, err = run(["sweep", str(model), "--vary", "lighting.ao.samples=4,16,64", "--out", str(out),
-                             "--set", "lighting.enabled=true", "--set", "lighting.ao.enabled=true"], capsys)
+    sets = ["--set", "lighting.enabled=true", "--set", "lighting.ao.enabled=true"]
+    code, _, err = run(["run", str(model), "--out", str(out), "--quiet", *sets], capsys)
     assert code == 0, err
-    table = json.loads(out.with_suffix(".json").read_text())
+    code, stdout, err = run(["sweep", str(model), "--vary", "lighting.ao.samples=4,16,64", "--out", str(out),
+                             *sets], capsys)
+    assert code == 0, err
+    stem = out / "sweeps" / "lighting.ao.samples"
+    table = json.loads(stem.with_suffix(".samples.json").read_text())
     rows = {r["value"]: r for r in table["rows"]}
     assert set(rows) == {4, 16, 64} and rows[64]["rmse"] == 0.0
     assert rows[4]["rmse"] > rows[16]["rmse"] > 0  # error falls with samples against the 64-spp reference
     assert rows[4]["rays"] < rows[16]["rays"] < rows[64]["rays"]
-    assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert stem.with_suffix(".samples.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "updated" in stdout and "report.html" in stdout
+    page = (out / "report.html").read_text()
+    assert "alt='sweep lighting.ao.samples'" in page  # the bake's report shows the sweep
     code, _, err = run(["sweep", str(model), "--vary", "bsp.enabled=1,2"], capsys)
     assert code == 2 and "numeric" in err

@@ -89,3 +89,84 @@ def test_sweep_soft_shadow_samples():
     rmse = [r["rmse"] for r in table["rows"]]
     assert all(a > b for a, b in zip(rmse, rmse[1:])) and rmse[-1] > 0
     assert table["slope"] <= -0.5
+
+
+# --------------------------------------------------------------------------- any numeric key of any stage
+def _sphere_obj(tmp_path, subdivisions=3):
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdivisions)
+    p = tmp_path / "sphere.obj"
+    p.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in m.vertices)
+                 + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in m.faces))
+    return p
+
+
+def _model_cfg(path, *sets):
+    return config_mod.load(None, [f"input.path={path}", *sets])
+
+
+def test_sweep_simplify_target_reports_hausdorff_bytes_and_image_error(tmp_path):
+    model = _sphere_obj(tmp_path)  # 1,280 triangles
+    cfg = _model_cfg(model, "mesh.simplify.enabled=true")
+    table = sweep(cfg, "mesh.simplify.target_ratio", [0.5, 0.05, 0.2], out=tmp_path / "sw")
+    rows = table["rows"]
+    assert [r["value"] for r in rows] == [0.05, 0.2, 0.5]
+    assert table["stages"] == ["simplify"] and table["error_key"] == "hausdorff_max"
+    tris = [r["triangles"] for r in rows]
+    assert tris == sorted(tris) and abs(tris[-1] - 640) <= 7  # within 1% of the target
+    assert [r["bytes"] for r in rows] == sorted(r["bytes"] for r in rows)  # bytes grow with triangles
+    # the error is the simplify stage's own Hausdorff figure, and it shrinks with the budget
+    for r in rows:
+        assert r["error"] == r["accuracy"]["hausdorff_max"] and r["seconds"] > 0
+    assert rows[0]["error"] > rows[-1]["error"] > 0
+    # image error against the reference (the highest value) is 0 there and grows as it coarsens
+    assert rows[-1]["reference"] and rows[-1]["image_rmse"] == 0.0
+    assert rows[0]["image_rmse"] > rows[1]["image_rmse"] > 0
+    assert (tmp_path / "sw.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((tmp_path / "sw.json").read_text())["error_metric"].startswith("Hausdorff")
+
+
+def test_sweep_bvh_key_reports_sah_cost_and_identical_images(tmp_path):
+    model = _sphere_obj(tmp_path, 2)
+    cfg = _model_cfg(model, "bvh.enabled=true")
+    table = sweep(cfg, "bvh.leaf_size", [1, 4, 8])
+    rows = table["rows"]
+    assert table["error_key"] == "sah_cost" and all(r["error"] > 0 for r in rows)
+    assert all(r["image_rmse"] == 0.0 for r in rows)  # the BVH does not change what is drawn
+    assert all(r["bytes"] > 0 and r["stage_seconds"]["bvh"] == r["seconds"] for r in rows)
+
+
+def test_sweep_key_of_a_stage_that_does_not_run_is_an_error(tmp_path):
+    model = _sphere_obj(tmp_path, 1)
+    with pytest.raises(ConfigError, match="bsp.enabled = true"):
+        sweep(_model_cfg(model), "bsp.candidates", [4, 8])
+    with pytest.raises(ConfigError, match="lighting keys only"):
+        sweep(_cfg(), "mesh.simplify.target_ratio", [0.5], scene=_scene())
+
+
+def test_sweep_error_of_keys():
+    from bake.sweep import error_of, stages_for
+
+    assert stages_for("textures.lightmap.resolution") == ("textures", "lighting")
+    assert error_of("textures.lightmap.resolution")[0] == "image_rmse"
+    assert error_of("lighting.ao.samples")[0] == "rmse"
+    assert error_of("bsp.candidates")[0] == "inflation"
+    for key in config_mod.numeric_keys():  # every numeric key of the bake belongs to a stage
+        assert stages_for(key) or key.startswith("report."), key
+    with pytest.raises(ConfigError, match="does not change what is baked"):
+        sweep(_cfg(), "report.preview_width", [100, 200])
+
+
+def test_sweep_lighting_key_compares_colours_before_the_bsp_splits(tmp_path):
+    """Later stages (BSP) change the triangles and vertices; the colour errors are taken from the
+    lighting stage's own output, so each row compares like with like."""
+    sc = _scene()  # a sphere resting on a floor: the floor is occluded
+    model = tmp_path / "floor.obj"
+    model.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in sc.positions)
+                     + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in sc.triangles))
+    cfg = _model_cfg(model, "lighting.enabled=true", "lighting.ao.enabled=true", "bsp.enabled=true")
+    table = sweep(cfg, "lighting.ao.samples", [4, 16, 256])
+    rows = table["rows"]
+    assert rows[0]["rmse"] > rows[1]["rmse"] > rows[2]["rmse"] == 0.0
+    assert all(r["bytes"] > 0 and "bsp" in r["stage_seconds"] for r in rows)

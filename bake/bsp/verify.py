@@ -92,7 +92,7 @@ def check_camera(scene, cam: Camera, order: np.ndarray | None = None, *, edge_px
     p = render(cam, tv, mode="painter", order=order, two_sided=ts)
     cov = z.covered
     mis = (z.tri_id != p.tri_id) & cov
-    ties = mis & _near_coplanar(cam, tv, z, p, mis, tie * scene.scale())
+    ties = mis & near_coplanar(cam, tv, z, p, mis, tie * scene.scale())
     edge = mis & ~ties & ((z.edge <= edge_px) | (p.edge <= edge_px))
     interior = mis & ~ties & ~edge
     return CameraCheck(eye=tuple(float(x) for x in cam.position), covered=int(cov.sum()),
@@ -100,7 +100,7 @@ def check_camera(scene, cam: Camera, order: np.ndarray | None = None, *, edge_px
                        interior=int(interior.sum()))
 
 
-def _near_coplanar(cam: Camera, tv: np.ndarray, z, p, mis: np.ndarray, tol: float) -> np.ndarray:
+def near_coplanar(cam: Camera, tv: np.ndarray, z, p, mis: np.ndarray, tol: float) -> np.ndarray:
     """At the differing pixels: is the point each render sees within ``tol`` of the plane of
     the triangle the other render sees?"""
     out = np.zeros(mis.shape, bool)

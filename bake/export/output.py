@@ -10,7 +10,7 @@ from ..pipeline import BakeResult
 from . import report as report_mod
 from .write import depfile_text, write_atomic, write_outputs
 
-REPORT_FILES = ("report.json", "report.md")
+REPORT_FILES = ("report.json", "report.md", "report.html")
 
 
 def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) -> dict[str, Any]:
@@ -30,6 +30,11 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) ->
     if not write_atomic(out_dir / "report.json", report_mod.to_json(rep)):
         os.utime(out_dir / "report.json")
     write_atomic(out_dir / "report.md", report_mod.to_markdown(rep).encode("utf-8"))
+    if result.config.report.html:
+        from . import html
+
+        w = result.config.report.preview_width
+        html.write(out_dir, width=w, height=max(1, w * 3 // 4))
     if depfile is not None:
         deps = [p.resolve() for p in src.files_read]
         if result.config.source:

@@ -1,10 +1,11 @@
 """The size/limit report: ``report.json`` for scripts, ``report.md`` and a terminal summary for people.
 
-``report.json`` shape (stable; documented in docs/report.md; ``report_version`` bumps on breaking changes):
+``report.json`` shape (stable; documented in docs/formats.md; ``report_version`` bumps on breaking changes):
 
 * ``report_version``, ``tool`` {name, version}
 * ``input`` {path, format, files_read}
 * ``scene`` {polygons, triangles, vertices, materials} after the last stage
+* ``materials``: list of {name, color (sRGB RGBA 0..1), double_sided, texture} in list order
 * ``stages``: list in run order of {name, seconds, counts_in, counts_out, accuracy, warnings, effects, details}
 * ``lists``: name -> {items, stride, bytes, file, doc}; ``bytes`` is what the list adds to project.json
 * ``limits``: list of {name, value, limit, ok, note}
@@ -74,6 +75,10 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "input": {"path": str(src.path) if src.path else None, "format": src.format,
                   "files_read": [str(p) for p in src.files_read]},
         "scene": counts(scene),
+        "materials": [{"name": m.name, "color": [round(float(c), 6) for c in m.color],
+                       "double_sided": bool(m.double_sided),
+                       "texture": str(m.texture) if m.texture is not None else None}
+                      for m in scene.materials],
         "stages": [r.to_json() for r in result.records],
         "lists": lists,
         "limits": limits,

@@ -1,0 +1,362 @@
+"""``report.html``: the bake as an author would rather look at it than read it.
+
+Built from the output folder alone (``report.json``, ``lists.json``, the written .sb3 and any
+``sweeps/*.json``), so ``bake report OUT_DIR`` re-renders it without baking and every picture
+shows what Scratch will load: previews rendered from the rounded lists in the painter's order
+of the BSP walk next to a z-buffer render and their difference, textures and the lightmap
+decoded back from each encoding, a bar per Scratch limit, the stage table with effects run and
+skipped, and the sweep tables and plots. One self-contained file: images are embedded as PNG
+data URIs, no script, no network.
+
+    html_text, info = build(out_dir)       # info: what each image is, for tests and the CLI
+    write(out_dir)                         # out_dir/report.html (atomic)
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .report import _fmt_bytes
+from .write import write_atomic
+
+HTML_NAME = "report.html"
+SWEEP_DIR = "sweeps"
+
+
+def _esc(x: Any) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def png_data_uri(img: np.ndarray, scale: int = 1) -> str:
+    from PIL import Image
+
+    a = np.asarray(img, np.uint8)
+    if scale > 1:
+        a = a.repeat(scale, 0).repeat(scale, 1)
+    buf = io.BytesIO()
+    Image.fromarray(a).save(buf, format="PNG", optimize=False)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _bytes_uri(data: bytes, mime: str = "image/png") -> str:
+    return f"data:{mime};base64," + base64.b64encode(data).decode("ascii")
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int):
+        return f"{v:,}"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_fmt(x)}" for k, x in v.items())
+    return str(v)
+
+
+def bar_class(fraction: float) -> str:
+    """Colour of a limit bar: ok below 50 %, watch to 80 %, near to 100 %, over above."""
+    return "ok" if fraction < 0.5 else "watch" if fraction < 0.8 else "near" if fraction <= 1.0 else "over"
+
+
+# --------------------------------------------------------------------------- reading the output folder
+def _load_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("not found: is this a bake output folder? (bake run writes report.json and lists.json)",
+                         path=path) from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"cannot be read as JSON: {e}", path=path) from None
+
+
+def _sb3_costumes(out_dir: Path, report: dict) -> dict[str, bytes]:
+    """Costume name -> image bytes from the .sb3 this bake wrote (if any)."""
+    from .sb3 import read_archive
+
+    sb3s = sorted(k for k, v in report.get("outputs", {}).items() if k.endswith(".sb3") and v != "removed")
+    out: dict[str, bytes] = {}
+    for name in sb3s:
+        path = out_dir / name
+        if not path.is_file():
+            continue
+        files = read_archive(path)
+        try:
+            project = json.loads(files.get("project.json", b"{}"))
+        except json.JSONDecodeError:
+            continue
+        for target in project.get("targets", []):
+            for c in target.get("costumes", []):
+                data = files.get(c.get("md5ext", ""))
+                if data is not None and c.get("name") not in out:
+                    out[c["name"]] = data
+        break
+    return out
+
+
+def _pattern(template: str) -> re.Pattern:
+    return re.compile("^" + re.escape(template).replace(re.escape("{material}"), "(.+)") + "$")
+
+
+def decoded_textures(lists: dict[str, list], report: dict, costumes: dict[str, bytes]) -> list[dict]:
+    """Every texture the bake wrote, decoded back from each encoding: [{name, width, height,
+    images: {encoding: (H, W, 4) uint8}, agree: bool}]."""
+    from PIL import Image
+
+    from ..textures import colors, textimage
+
+    tc = report.get("config", {}).get("textures", {})
+    size_re = _pattern(tc.get("size_list_name", "tex {material} size"))
+    out = []
+    for size_name in sorted(lists):
+        m = size_re.match(size_name)
+        if not m or len(lists[size_name]) != 2:
+            continue
+        key = m.group(1)
+        fmt = {"material": key}
+        w, h = (int(float(v)) for v in lists[size_name])
+        images: dict[str, np.ndarray] = {}
+        name = tc.get("list_name", "tex {material}").format(**fmt)
+        if name in lists and len(lists[name]) == w * h:
+            images["colour list"] = colors.list_to_image(lists[name], w, h, tc.get("first_row", "bottom"))
+        tname = tc.get("textimage_list_name", "tex {material} textimage").format(**fmt)
+        if tname in lists and lists[tname]:
+            images["TextImage"] = textimage.decode(str(lists[tname][0]), channels=4)
+        cname = tc.get("costume_name", "tex {material}").format(**fmt)
+        if cname in costumes:
+            im = Image.open(io.BytesIO(costumes[cname])).convert("RGBA")
+            images["costume"] = np.asarray(im)
+        if not images:
+            continue
+        ref = next(iter(images.values()))
+        agree = all(v.shape == ref.shape and np.array_equal(v[..., :3], ref[..., :3]) for v in images.values())
+        out.append({"name": key, "width": w, "height": h, "images": images, "agree": agree})
+    return out
+
+
+# --------------------------------------------------------------------------- sections
+CSS = """
+body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:24px auto;max-width:1120px;
+color:#1d2330;padding:0 16px}
+h1{font-size:22px;margin:0 0 4px}h2{font-size:17px;margin:28px 0 8px;border-bottom:1px solid #dde;padding-bottom:4px}
+.sub{color:#5a6475}table{border-collapse:collapse;width:100%;margin:6px 0}
+td,th{border-bottom:1px solid #e8eaf0;padding:4px 6px;text-align:left;vertical-align:top;font-size:13px}
+th{background:#f5f6fa}td.n{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
+.bar{position:relative;background:#eef0f5;height:14px;border-radius:3px;min-width:160px;overflow:hidden}
+.bar span{position:absolute;left:0;top:0;bottom:0;border-radius:3px}
+.ok span{background:#3aa55d}.watch span{background:#d9b100}.near span{background:#e67e22}.over span{background:#d62d20}
+.views{display:grid;grid-template-columns:repeat(3,1fr);gap:8px}figure{margin:0}
+figure img{width:100%;border:1px solid #dde;image-rendering:auto}figcaption{font-size:12px;color:#5a6475}
+.tex img{image-rendering:pixelated;border:1px solid #dde;max-width:256px;min-width:96px}
+.tex{display:flex;gap:12px;flex-wrap:wrap;align-items:flex-end}.bad{color:#d62d20;font-weight:600}
+.good{color:#2b7d45;font-weight:600}.skip{color:#8a93a3}code{background:#f2f3f7;padding:0 3px;border-radius:3px}
+"""
+
+
+def _limits_section(report: dict) -> str:
+    rows = []
+    for lim in report.get("limits", []):
+        frac = lim["value"] / lim["limit"] if lim["limit"] else 0.0
+        cls = bar_class(frac)
+        width = min(frac, 1.0) * 100
+        shown = _fmt_bytes(lim["value"]) if "bytes" in lim["name"] else f"{lim['value']:,}"
+        limit = _fmt_bytes(lim["limit"]) if "bytes" in lim["name"] else f"{lim['limit']:,}"
+        rows.append(f"<tr><td>{_esc(lim['name'])}</td><td class=n>{shown}</td><td class=n>{limit}</td>"
+                    f"<td><div class='bar {cls}' title='{frac:.1%}'><span style='width:{width:.1f}%'></span></div>"
+                    f"</td><td class=n>{frac:.1%}</td><td>{'ok' if lim['ok'] else '<b class=bad>EXCEEDED</b>'}"
+                    f"</td></tr>")
+    return ("<h2>Scratch limits</h2><p class=sub>Green below 50 %, yellow to 80 %, orange to 100 %, red over. "
+            "Lists: vanilla <code>add to list</code> stops at 200,000 items (loading is not limited); "
+            "project.json: 5 MiB upload limit; each asset under 10 MB.</p>"
+            "<table><tr><th>check</th><th>value</th><th>limit</th><th style='width:30%'>used</th><th></th>"
+            f"<th></th></tr>{''.join(rows)}</table>")
+
+
+def _views_section(views: list, mesh) -> str:
+    parts = [f"<h2>Previews</h2><p class=sub>Rendered from the written lists (rounded positions, encoded "
+             f"colours: {_esc(mesh.colour_source)}) by scratch-bake's numpy rasterizer. Left: the painter's "
+             f"order a Scratch engine would draw ({_esc(views[0].stats['order']) if views else ''}); middle: "
+             f"a depth-buffer render (the exact answer); right: where the painter shows another triangle in "
+             f"a visibly different colour — <b class=bad>red</b>: wrong order; <b style='color:#e67e22'>"
+             f"orange</b>: within a pixel of a triangle's edge; <b style='color:#b89600'>yellow</b>: the two "
+             f"faces are coplanar to the bake (either order is right).</p>"]
+    for v in views:
+        s = v.stats
+        cls = "good" if s["wrong_pixels"] == 0 else "bad"
+        parts.append(
+            f"<h3 style='font-size:14px;margin:14px 0 4px'>{_esc(v.name)}: <span class={cls}>"
+            f"{s['wrong_pixels']:,} wrong pixels ({s['wrong_fraction']:.3%} of {s['covered_pixels']:,})"
+            f"</span>, {s['edge_pixels']:,} on edges, {s['tie_pixels']:,} coplanar ties, {s['drawn']:,} triangles "
+            f"drawn</h3><div class=views>"
+            f"<figure><img alt='painter {_esc(v.name)}' src='{png_data_uri(v.painter)}'>"
+            f"<figcaption>painter's order</figcaption></figure>"
+            f"<figure><img alt='z-buffer {_esc(v.name)}' src='{png_data_uri(v.zbuffer)}'>"
+            f"<figcaption>depth buffer</figcaption></figure>"
+            f"<figure><img alt='difference {_esc(v.name)}' src='{png_data_uri(v.diff)}'>"
+            f"<figcaption>difference</figcaption></figure></div>")
+    return "".join(parts)
+
+
+def _textures_section(textures: list[dict]) -> str:
+    if not textures:
+        return ""
+    parts = ["<h2>Textures and lightmap, as encoded</h2><p class=sub>Each image is decoded back from what "
+             "was written (colour list, TextImage string, costume PNG), so this is what Scratch gets.</p>"]
+    for t in textures:
+        agree = ("<span class=good>all encodings decode to the same pixels</span>" if t["agree"] else
+                 "<span class=bad>encodings differ</span>")
+        scale = max(1, min(8, 256 // max(t["width"], t["height"], 1)))
+        figs = "".join(f"<figure><img alt='{_esc(t['name'])} {_esc(k)}' src='{png_data_uri(img, scale)}'>"
+                       f"<figcaption>{_esc(k)}</figcaption></figure>" for k, img in t["images"].items())
+        parts.append(f"<h3 style='font-size:14px;margin:14px 0 4px'>{_esc(t['name'])} "
+                     f"({t['width']}×{t['height']}): {agree}</h3><div class=tex>{figs}</div>")
+    return "".join(parts)
+
+
+def _stages_section(report: dict) -> str:
+    total = max(report.get("seconds") or 0.0, 1e-9)
+    rows = []
+    for st in report.get("stages", []):
+        frac = st["seconds"] / total
+        cin = st["counts_in"].get("triangles", 0)
+        cout = st["counts_out"].get("triangles", 0)
+        acc = "<br>".join(f"{_esc(k)} {_esc(_fmt(v))}" for k, v in st.get("accuracy", {}).items())
+        warn = "<br>".join(_esc(w) for w in st.get("warnings", []))
+        rows.append(f"<tr><td>{_esc(st['name'])}</td><td class=n>{st['seconds']:.3f}</td>"
+                    f"<td><div class='bar ok' style='min-width:80px'><span style='width:{min(frac, 1) * 100:.1f}%'>"
+                    f"</span></div></td><td class=n>{cin:,}</td><td class=n>{cout:,}</td><td>{acc}</td>"
+                    f"<td>{warn}</td></tr>")
+    eff = []
+    for e in report.get("effects", []):
+        if e.get("reason") == "stage ran":
+            continue
+        extra = f" · {e['rays']:,} rays" if e.get("rays") else ""
+        extra += f" · {e['seconds']:.3f} s" if isinstance(e.get("seconds"), (int, float)) else ""
+        extra += f" · error {e['error']:.3g}" if isinstance(e.get("error"), (int, float)) else ""
+        cls = "" if e.get("ran") else " class=skip"
+        eff.append(f"<tr{cls}><td>{_esc(e['name'])}</td><td>{'ran' if e.get('ran') else 'skipped'}</td>"
+                   f"<td>{_esc(e.get('reason', ''))}{_esc(extra)}</td></tr>")
+    return (f"<h2>Stages</h2><table><tr><th>stage</th><th>seconds</th><th>share</th><th>triangles in</th>"
+            f"<th>out</th><th>accuracy</th><th>warnings</th></tr>{''.join(rows)}</table>"
+            f"<h2>Effects and stages: run and skipped</h2><table><tr><th>effect</th><th></th><th>why / cost</th>"
+            f"</tr>{''.join(eff)}</table>")
+
+
+def _lists_section(report: dict) -> str:
+    lists = report.get("lists", {})
+    total = max(sum(v["bytes"] for v in lists.values()), 1)
+    rows = []
+    for name, v in sorted(lists.items(), key=lambda kv: -kv[1]["bytes"]):
+        frac = v["bytes"] / total
+        rows.append(f"<tr><td>{_esc(name)}</td><td class=n>{v['items']:,}</td><td class=n>{v['stride'] or 'var'}"
+                    f"</td><td class=n>{_fmt_bytes(v['bytes'])}</td><td><div class='bar ok'><span style='width:"
+                    f"{frac * 100:.1f}%'></span></div></td><td class=sub>{_esc(v.get('doc', ''))}</td></tr>")
+    return (f"<h2>Lists: where project.json's bytes go</h2><table><tr><th>list</th><th>items</th><th>stride</th>"
+            f"<th>bytes</th><th style='width:20%'>share of list bytes</th><th>what</th></tr>{''.join(rows)}</table>")
+
+
+def load_sweeps(out_dir: Path) -> list[dict]:
+    folder = out_dir / SWEEP_DIR
+    out = []
+    if folder.is_dir():
+        for j in sorted(folder.glob("*.json")):
+            try:
+                table = json.loads(j.read_text(encoding="utf-8"))
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+                continue
+            if isinstance(table, dict) and "rows" in table and "key" in table:
+                png = j.with_suffix(".png")
+                out.append({"table": table, "png": png.read_bytes() if png.is_file() else None, "file": j.name})
+    return out
+
+
+def _sweeps_section(sweeps: list[dict]) -> str:
+    if not sweeps:
+        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. Run for example <code>bake sweep "
+                "MODEL --vary mesh.simplify.target_ratio=0.02,0.1,0.5 --out THIS_FOLDER</code> "
+                "(any numeric key: <code>bake keys</code>) and the table and plot appear here.</p>")
+    parts = ["<h2>Accuracy against time</h2>"]
+    for sw in sweeps:
+        t = sw["table"]
+        metric = t.get("error_metric", "rmse")
+        head = "<tr><th>value</th><th>stage s</th><th>total s</th><th>error</th><th>image error</th><th>bytes</th>" \
+               "<th>triangles</th></tr>"
+        rows = []
+        for r in t["rows"]:
+            err = r.get("error", r.get("rmse"))
+            rows.append(f"<tr><td class=n>{_esc(r['value'])}{' (reference)' if r.get('reference') else ''}</td>"
+                        f"<td class=n>{_fmt(r.get('seconds'))}</td><td class=n>{_fmt(r.get('total_seconds'))}</td>"
+                        f"<td class=n>{_fmt(err)}</td><td class=n>{_fmt(r.get('image_rmse'))}</td>"
+                        f"<td class=n>{_fmt(r.get('bytes'))}</td><td class=n>{_fmt(r.get('triangles'))}</td></tr>")
+        img = f"<img style='width:100%' alt='sweep {_esc(t['key'])}' src='{_bytes_uri(sw['png'])}'>" if sw["png"] \
+            else ""
+        parts.append(f"<h3 style='font-size:14px'>{_esc(t['key'])} ({_esc(sw['file'])}; error: {_esc(metric)})"
+                     f"</h3>{img}<table>{head}{''.join(rows)}</table>")
+    return "".join(parts)
+
+
+# --------------------------------------------------------------------------- the page
+def build(out_dir: Path, *, width: int = 320, height: int = 240) -> tuple[str, dict[str, Any]]:
+    """The report page for a finished bake in ``out_dir`` and facts about what it shows."""
+    from . import preview
+
+    out_dir = Path(out_dir)
+    report = _load_json(out_dir / "report.json")
+    cfg = report.get("config", {})
+    json_name = cfg.get("export", {}).get("json_name", "lists.json")
+    lists_doc = _load_json(out_dir / json_name) if (out_dir / json_name).is_file() else {"lists": {}}
+    lists = lists_doc.get("lists", {})
+    costumes = _sb3_costumes(out_dir, report)
+    textures = decoded_textures(lists, report, costumes)
+    lightmap = next((t for t in textures if t["name"] == "lightmap"), None)
+    lm_img = None
+    if lightmap is not None:
+        lm_img = next(iter(lightmap["images"].values()))[..., :3].astype(np.float64) / 255.0
+    mesh = preview.mesh_from_lists(lists, report, lightmap=lm_img)
+    tie = max(float(cfg.get("bsp", {}).get("epsilon", 1e-6)), 2.0 * 10.0 ** -int(cfg.get("export", {}).get(
+        "precision", 5)))  # the tree's epsilon, or the rounding of the written positions
+    views = preview.render_views(mesh, width, height, tie) if mesh is not None and len(mesh.tris) else []
+    sweeps = load_sweeps(out_dir)
+    s = report.get("scene", {})
+    title = Path(report.get("input", {}).get("path") or "bake").name
+    pj = next((lim for lim in report.get("limits", []) if lim["name"].startswith("project.json")), None)
+    pj_line = (f" · project.json {_fmt_bytes(pj['value'])} of 5 MiB ({pj['value'] / pj['limit']:.1%})"
+               if pj else "")
+    bad = [lim for lim in report.get("limits", []) if not lim["ok"]]
+    head = (f"<h1>{_esc(title)}</h1><p class=sub>scratch-bake {_esc(report.get('tool', {}).get('version', ''))} · "
+            f"{report.get('seconds', 0):.2f} s · {s.get('triangles', 0):,} triangles, {s.get('vertices', 0):,} "
+            f"vertices, {s.get('materials', 0):,} materials{pj_line}"
+            + (f" · <b class=bad>{len(bad)} limit(s) exceeded</b>" if bad else " · <b class=good>within every limit"
+                                                                               "</b>") + "</p>")
+    body = [head, _limits_section(report)]
+    if views:
+        body.append(_views_section(views, mesh))
+    else:
+        why = (f"{json_name} was not written (export.json = false)" if not (out_dir / json_name).is_file() else
+               "the bake wrote no vertex and triangle lists")
+        body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
+    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps)]
+    page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
+            f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"
+            f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "
+            "re-render with <code>bake report FOLDER</code>.</p></body></html>\n")
+    info = {"views": [{"name": v.name, **v.stats} for v in views],
+            "textures": [{"name": t["name"], "encodings": list(t["images"]), "agree": t["agree"]} for t in textures],
+            "sweeps": [sw["file"] for sw in sweeps], "images": page.count("<img ")}
+    return page, info
+
+
+def write(out_dir: Path, **kw) -> dict[str, Any]:
+    """Write ``out_dir/report.html`` atomically; returns :func:`build`'s info."""
+    page, info = build(out_dir, **kw)
+    write_atomic(Path(out_dir) / HTML_NAME, page.encode("utf-8"))
+    return info

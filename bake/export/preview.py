@@ -1,0 +1,273 @@
+"""Previews of a finished bake, rendered from what Scratch will get: the written lists.
+
+Everything here reads the output folder's ``lists.json`` (and the .sb3's costumes), never the
+in-memory scene, so a preview shows the rounded positions, the encoded colour numbers and the
+decoded lightmap exactly as a Scratch project loads them::
+
+    mesh = mesh_from_lists(lists, report)            # lists: name -> items, report: report.json
+    views = render_views(mesh, width=320, height=240)
+    for v in views:
+        v.painter, v.zbuffer, v.diff                  # (H, W, 3) uint8 images
+        v.stats                                       # wrong pixels, ties, order used
+
+The painter's image draws the triangles in the order a Scratch painter engine would: the BSP walk
+of ``bsp nodes`` / ``bsp planes`` for the camera (bake/bsp/traverse.py, the reference model of
+the reader sprite's ``bsp walk`` block), or, without a BSP tree, the book's painter's sort by
+centroid depth. The z-buffer image is the exact reference; the difference image marks pixels
+where the painter shows another triangle in a visibly different colour: red where the order is
+wrong, orange on a triangle's edge (rasterization of slivers), yellow where the two faces are
+coplanar to the bake (either order is right; see bake/bsp/verify.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..render import Camera, Image, headlight, render
+from ..textures.colors import decode_numbers
+
+#: two pixels differ visibly when a channel differs by more than this (0..255)
+VISIBLE = 2
+
+
+@dataclass
+class Mesh:
+    """The mesh as a Scratch project reads it back from the lists (0-based arrays)."""
+    verts: np.ndarray  # (V, 3) float64
+    tris: np.ndarray  # (T, 3) int64, 0-based
+    material: np.ndarray  # (T,) int64, 0-based
+    mat_rgb: np.ndarray  # (M, 3) float 0..1
+    two_sided: np.ndarray  # (M,) bool
+    tri_rgb: np.ndarray | None = None  # (T, 3) baked triangle colours
+    vert_rgb: np.ndarray | None = None  # (V, 3) baked vertex colours
+    vertex_output: str = "color"  # "light": the engine multiplies the material colour
+    lightmap: np.ndarray | None = None  # (H, W, 3) float, row 0 at the top
+    lightmap_uvs: np.ndarray | None = None  # (T, 3, 2), v up
+    bsp_nodes: list | None = None
+    bsp_planes: list | None = None
+    colour_source: str = "material colours"
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def flat_tris(self) -> list:
+        """The ``tris`` list as Scratch holds it (1-based, stride 4)."""
+        return np.c_[self.tris + 1, self.material + 1].ravel().tolist()
+
+    @property
+    def corners(self) -> np.ndarray:
+        return self.verts[self.tris]
+
+
+def _rgb(items) -> np.ndarray:
+    return decode_numbers(items)[:, :3].astype(np.float64) / 255.0
+
+
+def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
+                    lightmap: np.ndarray | None = None) -> Mesh | None:
+    """Read the mesh lists back. ``report`` is report.json (for list names, the colour settings
+    and which materials are two-sided). ``lightmap``: the decoded lightmap image if one was
+    written. Returns None when the bake wrote no vertex or triangle list."""
+    cfg = report.get("config", {})
+    names = cfg.get("export", {}).get("names", {})
+    vname, tname = names.get("vertices", "verts"), names.get("triangles", "tris")
+    if vname not in lists or tname not in lists:
+        return None
+    verts = np.asarray(lists[vname], np.float64).reshape(-1, 3)
+    t = np.asarray(lists[tname], np.int64).reshape(-1, 4)
+    mats = report.get("materials") or []
+    mname = names.get("materials", "mat colors")
+    if mname in lists:
+        mat_rgb = _rgb(lists[mname])
+    elif mats:
+        mat_rgb = np.array([m["color"][:3] for m in mats], np.float64)
+    else:
+        mat_rgb = np.ones((max(int(t[:, 3].max(initial=1)), 1), 3))
+    two = np.zeros(len(mat_rgb), bool)
+    for i, m in enumerate(mats[:len(two)]):
+        two[i] = bool(m.get("double_sided"))
+    mesh = Mesh(verts=verts, tris=t[:, :3] - 1, material=np.clip(t[:, 3] - 1, 0, len(mat_rgb) - 1),
+                mat_rgb=mat_rgb, two_sided=two,
+                vertex_output=cfg.get("lighting", {}).get("vertex_output", "color"))
+    cname, vcname = names.get("triangle_colors", "tri colors"), names.get("vertex_colors", "vert colors")
+    if cname in lists and len(lists[cname]) == len(t):
+        mesh.tri_rgb = _rgb(lists[cname])
+    if vcname in lists and len(lists[vcname]) == len(verts):
+        mesh.vert_rgb = _rgb(lists[vcname])
+    lname = names.get("lightmap_uvs", "lightmap uvs")
+    if lightmap is not None and lname in lists and len(lists[lname]) == 6 * len(t):
+        mesh.lightmap = lightmap
+        mesh.lightmap_uvs = np.asarray(lists[lname], np.float64).reshape(-1, 3, 2)
+    if "bsp nodes" in lists and "bsp planes" in lists:
+        mesh.bsp_nodes, mesh.bsp_planes = lists["bsp nodes"], lists["bsp planes"]
+    mesh.colour_source = ("lightmap (bilinear)" if mesh.lightmap is not None else
+                          f"'{cname}' (flat per triangle)" if mesh.tri_rgb is not None else
+                          f"'{vcname}' (interpolated)" if mesh.vert_rgb is not None else
+                          f"'{mname}' with a headlight")
+    return mesh
+
+
+# --------------------------------------------------------------------------- cameras
+def cameras(verts: np.ndarray, width: int = 320, height: int = 240, fov: float = 45.0
+            ) -> list[tuple[str, Camera]]:
+    """Three views that frame the model's bounding sphere: front-right above, back-left, top.
+    The frame is the export's (y up); "front" looks along +z as in the default left-handed frame."""
+    lo, hi = verts.min(0), verts.max(0)
+    c = (lo + hi) / 2.0
+    r = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-12)
+    tan_v = math.tan(math.radians(fov) / 2.0)
+    tan_h = tan_v * width / height
+    out = []
+    for name, az, el in (("front right", -35.0, 25.0), ("back left", 145.0, 20.0), ("top", -10.0, 80.0)):
+        a, e = math.radians(az), math.radians(el)
+        d = np.array([math.sin(a) * math.cos(e), math.sin(e), -math.cos(a) * math.cos(e)])
+        probe = Camera(position=tuple(c + d), look_at=tuple(c), fov=fov, width=width, height=height)
+        _, right, up, fwd = probe.basis()
+        rel = verts - c  # the distance at which every vertex is inside the frame, plus 6 %
+        x, y, z = rel @ right, rel @ up, rel @ fwd
+        dist = float(np.max(np.maximum(np.abs(x) / tan_h, np.abs(y) / tan_v) - z)) * 1.06
+        dist = max(dist, 1e-9 * r)
+        out.append((name, Camera(position=tuple(c + dist * d), look_at=tuple(c), fov=fov, width=width,
+                                 height=height, near=max(dist - 1.5 * r, dist * 1e-4))))
+    return out
+
+
+# --------------------------------------------------------------------------- shading
+def pixel_barycentrics(camera: Camera, corners: np.ndarray, tri_id: np.ndarray) -> np.ndarray:
+    """(H, W, 3) barycentric weights of each covered pixel centre's ray on the triangle seen there
+    (perspective-correct: the ray meets the triangle's plane). Background pixels get 0."""
+    H, W = tri_id.shape
+    out = np.zeros((H, W, 3))
+    ys, xs = np.nonzero(tri_id >= 0)
+    if len(ys) == 0:
+        return out
+    eye, r, u, f = camera.basis()
+    fl = camera.focal
+    d = f + ((xs + 0.5 - W / 2.0) / fl)[:, None] * r - ((ys + 0.5 - H / 2.0) / fl)[:, None] * u
+    p = corners[tri_id[ys, xs]]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    det = np.where(np.abs(det) > 0, det, 1e-300)
+    s = eye - p[:, 0]
+    b1 = np.einsum("ij,ij->i", s, h) / det
+    b2 = np.einsum("ij,ij->i", d, np.cross(s, e1)) / det
+    w = np.clip(np.stack([1.0 - b1 - b2, b1, b2], 1), 0.0, 1.0)
+    w /= np.maximum(w.sum(1, keepdims=True), 1e-300)
+    out[ys, xs] = w
+    return out
+
+
+def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Sample an (H, W, 3) image (row 0 at the top) at uv in [0, 1] (v up), texel centres at
+    (i + 0.5) / W, clamped at the edges."""
+    H, W = img.shape[:2]
+    x = np.clip(uv[:, 0] * W - 0.5, 0, W - 1)
+    y = np.clip((1.0 - uv[:, 1]) * H - 0.5, 0, H - 1)
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, W - 1), np.minimum(y0 + 1, H - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+    bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def shade(mesh: Mesh, camera: Camera, im: Image, background=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """(H, W, 3) uint8: the colour Scratch shows at each pixel of a render (see
+    :attr:`Mesh.colour_source`)."""
+    H, W = im.tri_id.shape
+    img = np.empty((H, W, 3))
+    img[:] = np.asarray(background, np.float64)[:3]
+    cov = im.tri_id >= 0
+    tid = im.tri_id[cov]
+    if len(tid):
+        if mesh.lightmap is not None or (mesh.tri_rgb is None and mesh.vert_rgb is not None):
+            w = pixel_barycentrics(camera, mesh.corners, im.tri_id)[cov]
+        if mesh.lightmap is not None:
+            uv = np.einsum("nk,nkj->nj", w, mesh.lightmap_uvs[tid])
+            col = _bilinear(mesh.lightmap, uv)
+            if mesh.vertex_output == "light":
+                col = col * mesh.mat_rgb[mesh.material[tid]]
+        elif mesh.tri_rgb is not None:
+            col = mesh.tri_rgb[tid]
+        elif mesh.vert_rgb is not None:
+            col = np.einsum("nk,nkj->nj", w, mesh.vert_rgb[mesh.tris[tid]])
+            if mesh.vertex_output == "light":
+                col = col * mesh.mat_rgb[mesh.material[tid]]
+        else:  # plain material colours: a headlight so the shape reads
+            col = mesh.mat_rgb[mesh.material[tid]] * headlight(mesh.corners[tid], camera)[:, None]
+        img[cov] = col
+    return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
+
+
+# --------------------------------------------------------------------------- painter's order
+def painter_order(mesh: Mesh, eye) -> tuple[np.ndarray, str]:
+    """0-based draw order for a painter's engine at ``eye`` and how it was made."""
+    if mesh.bsp_nodes is not None:
+        from ..bsp.traverse import draw_order, facing_flags
+
+        flat = mesh.flat_tris
+        verts = mesh.verts.ravel().tolist()
+        face = facing_flags(flat, verts, eye, mesh.two_sided)
+        order = draw_order(mesh.bsp_nodes, mesh.bsp_planes, eye, flat, verts, mesh.two_sided, facing=face)
+        return np.asarray(order, np.int64) - 1, "BSP walk of 'bsp nodes' / 'bsp planes'"
+    depth = np.linalg.norm(mesh.corners.mean(1) - np.asarray(eye, np.float64), axis=1)
+    return np.argsort(-depth, kind="stable"), "painter's sort by centroid distance (no BSP tree)"
+
+
+@dataclass
+class View:
+    name: str
+    camera: Camera
+    painter: np.ndarray  # (H, W, 3) uint8
+    zbuffer: np.ndarray
+    diff: np.ndarray
+    stats: dict[str, Any]
+
+
+def difference(painter: Image, zbuf: Image, pimg: np.ndarray, zimg: np.ndarray, camera: Camera,
+               corners: np.ndarray, tie_tol: float, edge_px: float = 1.0) -> tuple[np.ndarray, dict[str, Any]]:
+    """The difference image and its pixel counts. Where the painter shows another triangle than
+    the depth buffer, the pixel is a *tie* when the two faces are within ``tie_tol`` of each
+    other's plane there (coplanar to the bake: either order is right), an *edge* pixel when its
+    centre is within ``edge_px`` of either triangle's edge, else *wrong* (a visible order error).
+    Drawn on the faded depth-buffer render: wrong red, edge orange, tie yellow; pixels whose
+    colour does not change are not marked (the author cannot see them)."""
+    from ..bsp.verify import near_coplanar
+
+    mis = (painter.tri_id != zbuf.tri_id) & zbuf.covered
+    visible = np.abs(pimg.astype(np.int16) - zimg.astype(np.int16)).max(2) > VISIBLE
+    tie = mis & near_coplanar(camera, corners, zbuf, painter, mis, tie_tol)
+    edge = mis & ~tie & ((zbuf.edge <= edge_px) | (painter.edge <= edge_px))
+    wrong = mis & ~tie & ~edge & visible
+    out = np.rint(zimg.astype(np.float64) * 0.25 + 0.75 * 255).astype(np.uint8)
+    out[tie & visible] = (240, 200, 0)
+    out[edge & visible] = (245, 140, 30)
+    out[wrong] = (220, 0, 0)
+    covered = int(zbuf.covered.sum())
+    return out, {"covered_pixels": covered, "wrong_pixels": int(wrong.sum()),
+                 "edge_pixels": int((edge & visible).sum()), "tie_pixels": int((tie & visible).sum()),
+                 "unseen_differences": int((mis & ~visible).sum()),
+                 "wrong_fraction": float(wrong.sum() / covered) if covered else 0.0}
+
+
+def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1e-5) -> list[View]:
+    """Each camera of :func:`cameras`: painter's render in the engine's order, the z-buffer
+    render, and their difference. ``tie``: faces this close (a fraction of the bounding-box
+    diagonal) count as coplanar (:func:`difference`)."""
+    corners = mesh.corners
+    diag = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if len(mesh.verts) else 1.0
+    two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
+    views = []
+    for name, cam in cameras(mesh.verts, width, height):
+        order, how = painter_order(mesh, cam.position)
+        pim = render(cam, corners, mode="painter", order=order, two_sided=two)
+        zim = render(cam, corners, mode="zbuffer", two_sided=two)
+        pimg, zimg = shade(mesh, cam, pim), shade(mesh, cam, zim)
+        diff, stats = difference(pim, zim, pimg, zimg, cam, corners, tie * diag)
+        stats.update({"order": how, "drawn": int(len(order)), "colours": mesh.colour_source})
+        views.append(View(name, cam, pimg, zimg, diff, stats))
+    return views

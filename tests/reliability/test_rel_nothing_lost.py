@@ -73,7 +73,7 @@ def comparable_one(name: str, data: bytes) -> object:
     fails: JSON does not parse, the Markdown loses its tail)."""
     if name == "report.json":
         return strip_timings(data)
-    if name == "report.md":
+    if name in ("report.md", "report.html"):  # (report.html: timings and the time bars' widths)
         return re.sub(rb"\d+\.\d+", b"#", data)
     return data
 
@@ -158,7 +158,7 @@ def textured_scene(folder: Path, extra: str = "") -> Path:
     return cfg
 
 
-LIGHTMAP = ('[textures.lightmap]\nenabled = true\nresolution = 32\ncache_dir = "none"\n')
+LIGHTMAP = ('[textures.lightmap]\nenabled = true\nresolution = 32\n')  # the default xatlas cache
 
 
 def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path, capsys):
@@ -170,8 +170,10 @@ def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path,
     assert sa.keys() == sb.keys() and {"m.sb3", "m.sprite3", "lists.json", "lists/vert_colors.txt",
                                        "lists/bvh_nodes.txt"} <= set(sa)
     for k in sa:
-        if k not in ("report.json", "report.md"):
+        if k not in ("report.json", "report.md", "report.html"):
             assert sa[k] == sb[k], f"{k} differs between two bakes"
+    # report.html: the same page but for the timings (and the width of the time bars)
+    assert comparable_one("report.html", sa["report.html"]) == comparable_one("report.html", sb["report.html"])
     # report.json differs only in timings and where it states the thread count
     ra, rb = strip_timings(sa["report.json"]), strip_timings(sb["report.json"])
     for r in (ra, rb):
@@ -185,7 +187,7 @@ def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path,
     rep = json.loads((a / "report.json").read_text())
     assert set(rep["outputs"].values()) == {"unchanged"}
     changed = [p.name for p in before if p.stat().st_mtime_ns != before[p]]
-    assert sorted(changed) == ["report.json", "report.md"], changed  # they carry timings
+    assert sorted(changed) == ["report.html", "report.json", "report.md"], changed  # they carry timings
     # files are created with the usual mode, not mkstemp's private 0o600
     mask = os.umask(0o022)
     os.umask(mask)
@@ -330,3 +332,7 @@ def test_reads_and_writes_stay_in_their_folders_and_depfile_lists_every_input(tm
     assert {"textures", "export"} <= ran, ran  # the texture was really read
     if kind == "obj_lightmap":
         assert "lightmap" in json.dumps(rep["lists"]), "no lightmap lists"
+        # the default xatlas cache is inside the output folder, and not an output (never listed or removed)
+        assert len(list((out / ".bake-cache" / "xatlas").rglob("*.npz"))) == 1
+        listed = json.loads((out / ".bake-manifest.json").read_text())["files"]
+        assert not [f for f in [*rep["outputs"], *listed] if ".bake-cache" in f]

@@ -454,11 +454,7 @@ def _lighting_cfg(sim: Similarity, extra: dict | None = None) -> dict:
 
 CASES = [
     StageCase("triangulate", polygon_scene, check_triangulate, lambda s: {"mesh": {"clean": {"enabled": False}}}),
-    StageCase("clean", polygon_scene, check_clean, xfail=dict.fromkeys(
-        ("rotate",),
-        "bug report: after a rotation, earcut cuts exactly-zero-area ears at collinear corners (the comb's "
-        "inner edge, edge midpoints); clean drops them, so the counts differ and the polygon is no longer "
-        "whole (test_rel_properties::test_earcut_zero_area_ears_at_collinear_corners)")),
+    StageCase("clean", polygon_scene, check_clean),
     StageCase("simplify", lambda: solid_scene(12), check_simplify,
               lambda s: {"mesh": {"simplify": {"enabled": True, "target_ratio": 0.25, "measure_error": False,
                                                "refine_rounds": 0}}},
@@ -472,10 +468,7 @@ CASES = [
               lambda s: {**_lighting_cfg(s, {"target": "lightmap"}),
                          "textures": {"enabled": True, "lightmap": {"enabled": True, "resolution": 64,
                                                                     "cache_dir": "none"}}},
-              _lightmap_ready, xfail=dict.fromkeys(
-                  ("scale_1e-3", "all_at_once"),
-                  "bug report: the lightmap atlas is unwrapped in world units; xatlas treats the triangles of a "
-                  "model 0.0074 across as degenerate (576 of 590 unmapped, a 14x14 atlas)")),
+              _lightmap_ready),
 ]
 CASE_IDS = ["triangulate", "clean", "simplify", "bsp", "bvh", "lighting", "lightmap"]
 SIMS = similarities()

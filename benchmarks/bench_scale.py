@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_scale.py [--triangles 1000000] [--materials 100]
         [--simplify-to 5000] [--obj-lines 10000000] [--skip-full] [--workdir DIR] [--quick]
+        [--parse-only] [--out FILE]
 
 Part 1, the pipeline. A bumpy height field of quads (``--triangles`` triangles after
 triangulation) in ``--materials`` tiles, one ``usemtl`` each, is written as OBJ + MTL. Then one
@@ -14,9 +15,10 @@ on the full-size mesh (no simplification), the stages whose cost grows with it.
 
 Part 3, the parser. An OBJ of ``--obj-lines`` lines (1/3 ``v``, 2/3 ``f``) is imported in a
 subprocess; peak RSS is reported against the file size (and against a 1/10 file, to show how it
-grows).
+grows). ``--parse-only`` runs this part alone and replaces only ``obj_parse`` in the results file.
 
-Writes ``benchmarks/results/scale.json``. Figures depend on the machine and its load (recorded).
+Writes ``benchmarks/results/scale.json`` (or ``--out``). Figures depend on the machine and its
+load (recorded).
 """
 
 from __future__ import annotations
@@ -156,6 +158,9 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=3600)
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--quick", action="store_true", help="100k triangles, 1M lines (a smoke run)")
+    ap.add_argument("--parse-only", action="store_true",
+                    help="only part 3 (the OBJ parser); keeps the other results in the output file")
+    ap.add_argument("--out", type=Path, default=OUT)
     a = ap.parse_args()
     if a.quick:
         a.triangles, a.obj_lines = 100_000, 1_000_000
@@ -164,6 +169,17 @@ def main() -> None:
     doc: dict = {"benchmark": "scale", "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                                                    "loadavg_1min_before": os.getloadavg()[0]},
                  "target_peak_gb": 4.0}
+
+    if a.parse_only:
+        doc = json.loads(a.out.read_text()) if a.out.is_file() else doc
+        doc["obj_parse_machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
+                                    "loadavg_1min_before": os.getloadavg()[0]}
+        parse_part(a, work, doc)
+        doc["obj_parse_machine"]["loadavg_1min_after"] = os.getloadavg()[0]
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        a.out.write_text(json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {a.out} (obj_parse only)")
+        return
 
     # ---- part 1: the pipeline, one child per stage
     t = time.perf_counter()
@@ -203,7 +219,16 @@ def main() -> None:
         doc["full_size"] = chain(["import", "transform", "triangulate", "clean", "lighting", "bvh"],
                                  stage_config(None, ao=True, bsp=False, bvh=True), "f")
 
-    # ---- part 3: the parser on big files
+    parse_part(a, work, doc)
+    doc["machine"]["loadavg_1min_after"] = os.getloadavg()[0]
+    doc["self_maxrss_kb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text(json.dumps(doc, indent=2) + "\n")
+    print(f"wrote {a.out}")
+
+
+def parse_part(a: argparse.Namespace, work: Path, doc: dict) -> None:
+    """Part 3: the OBJ parser on a 1/10 file and the full ``--obj-lines`` file."""
     parse = []
     for lines in (a.obj_lines // 10, a.obj_lines):
         path = work / f"lines{lines}.obj"
@@ -222,11 +247,6 @@ def main() -> None:
         parse.append(r)
         path.unlink()
     doc["obj_parse"] = parse
-    doc["machine"]["loadavg_1min_after"] = os.getloadavg()[0]
-    doc["self_maxrss_kb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(doc, indent=2) + "\n")
-    print(f"wrote {OUT}")
 
 
 if __name__ == "__main__":

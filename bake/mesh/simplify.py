@@ -24,15 +24,19 @@ Methods (quadric edge collapse, all through compiled libraries):
 
 After the library:
 
-1. flipped triangles (facing against the input surface under them, see
-   ``simplify_error.flip_votes``) are repaired where possible: turning the edge shared with a
-   neighbour, then moving one free corner back onto the input surface; repairs that cost shape
-   are undone. Triangles still flipped (or on a new non-manifold edge) get the input vertices
-   under them locked and the library runs again (two rounds).
+1. flipped triangles (normal turned by more than 90 degrees from the input surface they stand
+   for, sampled on the triangle itself; zero-area triangles have no reliable normal and are not
+   judged; see ``simplify_error.flip_check``) are repaired where possible: turning the edge
+   shared with a neighbour, then moving one free corner back onto the input surface; a repair
+   that makes the error over the triangles it touched (and their ring) worse by more than 10%
+   is undone. Triangles still flipped (or on a new non-manifold edge) get the input vertices
+   under them locked and the library runs again (three rounds). A flip verdict depends only on a
+   triangle's corners, so each check measures only triangles not judged before in the stage.
 2. ``fit_iterations`` rounds of least-squares refit of the free vertex positions to the input
    surface (bake/mesh/simplify_fit.py); kept only if the measured error drops.
-3. the error is measured (``measure_error``); ``refine_rounds`` times the input vertices where
-   it peaks are locked and the whole thing runs again, keeping the better result.
+3. the error is measured (``measure_error``; the measure step 2 took is reused);
+   ``refine_rounds`` times the input vertices under the (up to two, separate) places where it
+   peaks are locked and the whole thing runs again, keeping the better result.
 4. with a triangle target, a result that still has flipped triangles, new non-manifold edges or
    an error above ``error_ceiling`` is not accepted: the stage backs off to the smallest larger
    count that is acceptable and says so in the record (no holes on flat CAD-like geometry).
@@ -51,7 +55,7 @@ and a warning for anything that kept the target from being reached.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -60,15 +64,19 @@ from ..errors import ConfigError, StageError
 from ..record import StageRecord
 from ..scene import Scene
 from . import simplify_meshopt
-from .simplify_error import (SurfaceIndex, edge_counts, flip_votes, hausdorff, sample_surface, topology,
-                             triangle_normals)
+from .simplify_error import (FlipResult, HausdorffResult, SurfaceIndex, edge_counts, flip_check, hausdorff,
+                             sample_surface, topology, triangle_pattern)
 from .simplify_fit import refit
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
 METHODS = ("meshopt", "fast", "quality")
 # Rounds of "lock the input vertices under flipped triangles and simplify again".
-_REPAIR_ROUNDS = 2
+_REPAIR_ROUNDS = 3
+# Points of the flip check over the input's area (at least 3 per output triangle).
+_FLIP_SAMPLES = 8000
+# Each refine round keeps the input under this many separate places where the error peaks.
+_REFINE_PEAKS = 2
 # The fit pairs every input vertex (up to this many) and error_samples points with the output.
 _FIT_MAX_VERTICES = 200_000
 # Face colours with more distinct values than this are a colour signal, not flat regions.
@@ -88,9 +96,7 @@ class _Prepared:
     tri_uvs: np.ndarray | None
     face_colors: np.ndarray | None
     vertex_colors: np.ndarray | None
-    # input triangles the flip check cannot judge (flagged when the input is checked against
-    # itself: coincident opposite faces, overlapping internal walls)
-    ambiguous: np.ndarray | None = None
+    wedges: tuple | None = None  # _wedges(), once
 
 
 def _prepare(scene: Scene, cfg: SimplifyConfig) -> _Prepared:
@@ -162,7 +168,14 @@ class _Raw:
 
 
 def _wedges(prep: _Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-    """Wedge ids per corner (T, 3), wedge -> vertex, wedge -> region, wedge -> UV."""
+    """Wedge ids per corner (T, 3), wedge -> vertex, wedge -> region, wedge -> UV (computed
+    once per input)."""
+    if prep.wedges is None:
+        prep.wedges = _make_wedges(prep)
+    return prep.wedges
+
+
+def _make_wedges(prep: _Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     T = len(prep.F)
     corner_v = prep.F.reshape(-1)
     corner_r = np.repeat(prep.region, 3)
@@ -375,13 +388,15 @@ class _Out:
     notes: list[str]
     flipped: np.ndarray  # (t,) bool
     new_nonmanifold: np.ndarray  # (t,) bool: uses an edge with > 2 triangles the input did not have
-    voted_for: np.ndarray  # (T_in,) output triangle each input triangle stands under (-1: none)
     check_seconds: float = 0.0
+    h: HausdorffResult | None = None  # the stage's error measure of this result, once taken
+    flip: FlipResult | None = None
 
 
-def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceIndex,
-            fit_points: np.ndarray | None, protect: np.ndarray, scale: float) -> _Out:
-    """Drop repeated-corner triangles, compact vertices, refit positions, find flips."""
+def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceIndex, protect: np.ndarray,
+            scale: float, flip_cache: dict) -> _Out:
+    """Drop repeated-corner triangles, compact vertices, find and repair flips (the fit comes
+    after, in _fit)."""
     F = raw.F
     ok = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
     F = F[ok]
@@ -397,96 +412,120 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
     fixed = raw.fixed[used] | protect[src_vertex] & (np.linalg.norm(V - prep.V[src_vertex], axis=1) == 0)
     if tri_uvs is None and prep.tri_uvs is not None and src_tri is not None:
         tri_uvs = prep.tri_uvs[src_tri]  # corner order is kept by the libraries
-    tol = 1e-6 * scale
     t = time.perf_counter()
-    flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
-                   samples=cfg.error_samples)
-    before = (V.copy(), F.copy(), None if tri_uvs is None else tri_uvs.copy(), flipped, voted) if flipped.any() else None
+    info_repair = None
+
+    def check(Vc: np.ndarray, Fc: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
+        # only triangles not judged before (in this result or an earlier one) are measured
+        fr = flip_check(index_a, Vc, Fc, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale,
+                        prev=prev if prev is not None else flip_cache.get("last"))
+        flip_cache["last"] = fr
+        flip_cache["checked"] = flip_cache.get("checked", 0) + fr.checked
+        return fr
+
+    fr = check(V, F)
+    before = (V.copy(), F.copy(), None if tri_uvs is None else tri_uvs.copy(), fr) if fr.flipped.any() else None
     edge_flips = 0
     for _ in range(3):
-        if not flipped.any():
+        if not fr.flipped.any():
             break
-        n = _edge_flip_repair(prep, V, F, region, tri_uvs, src_tri, flipped, voted)
+        n = _edge_flip_repair(V, F, region, tri_uvs, fr)
         if n == 0:
             break
         edge_flips += n
-        flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
-                   samples=cfg.error_samples)
+        fr = check(V, F, fr)
     relocated = 0
-    if flipped.any():
+    if fr.flipped.any():
         V = V.copy()
-        relocated = _relocate_repair(prep, V, F, fixed, flipped, voted, index_a)
+        relocated = _relocate_repair(V, F, fixed, fr, index_a)
         if relocated:
-            flipped, voted = flip_votes(prep.V, prep.F, V, F, tol, index_a, ignore=prep.ambiguous,
-                   samples=cfg.error_samples)
+            fr = check(V, F, fr)
     if before is not None and (edge_flips or relocated):
         # repairs act on what the flip check flagged; keep them only if they do not cost shape
-        n = max(cfg.error_samples // 4, 1000)
-        h0 = hausdorff(prep.V, prep.F, before[0], before[1], samples=n, seed=cfg.seed + 9, index_a=index_a)
-        h1 = hausdorff(prep.V, prep.F, V, F, samples=n, seed=cfg.seed + 9, index_a=index_a)
-        if h1.max > 1.1 * h0.max + 1e-12 * scale:
-            V, F, tri_uvs, flipped, voted = before
+        # where they act (the error over the repaired triangles and the ring around them)
+        e0, e1 = _repair_cost(index_a, before[0], before[1], V, F)
+        info_repair = {"local_error_before": e0 / scale, "local_error_after": e1 / scale}
+        if e1 > 1.1 * e0 + 1e-12 * scale:
+            V, F, tri_uvs, fr = before
             edge_flips = relocated = 0
+            info_repair["undone"] = True
     check_s = time.perf_counter() - t
-    fit_s, info = 0.0, {"rounds": 0, "reverted_vertices": 0, "edge_flips": edge_flips,
-                        "relocated_vertices": relocated}
-    if cfg.fit_iterations > 0 and fit_points is not None and len(F):
-        t = time.perf_counter()
-        Vf, fit_info = refit(V, F, fixed, index_a, fit_points, iterations=cfg.fit_iterations,
-                             samples_b=min(cfg.error_samples, 20000), seed=cfg.seed)
-        info.update(fit_info)
-        fit_s = time.perf_counter() - t
-        t = time.perf_counter()
-        # the fit must not turn a triangle against the original surface: put back the corners
-        # of any triangle it flipped, and check again
-        for _ in range(6):
-            fl, vt = flip_votes(prep.V, prep.F, Vf, F, tol, index_a, ignore=prep.ambiguous,
-                   samples=cfg.error_samples)
-            new = fl & ~flipped
-            if not new.any():
-                break
-            back = np.unique(F[new].ravel())
-            moved = back[(Vf[back] != V[back]).any(axis=1)]
-            if len(moved) == 0:
-                break
-            info["reverted_vertices"] = info.get("reverted_vertices", 0) + int(len(moved))
-            Vf[moved] = V[moved]
-        else:
-            fl, vt = flip_votes(prep.V, prep.F, Vf, F, tol, index_a, ignore=prep.ambiguous,
-                   samples=cfg.error_samples)
-        keep_fit = not (fl & ~flipped).any()  # else: could not be repaired vertex by vertex
-        if keep_fit:
-            # the fit works from approximate closest points; keep it only where it measurably
-            # helps (on CAD-like meshes with slivers the correspondences can mislead it)
-            n = max(cfg.error_samples // 4, 1000)
-            h0 = hausdorff(prep.V, prep.F, V, F, samples=n, seed=cfg.seed + 5, index_a=index_a)
-            h1 = hausdorff(prep.V, prep.F, Vf, F, samples=n, seed=cfg.seed + 5, index_a=index_a)
-            keep_fit = h1.max <= h0.max and h1.mean <= h0.mean
-            info["kept"] = bool(keep_fit)
-        else:
-            info["abandoned"] = True
-        if keep_fit:
-            V, flipped, voted = Vf, fl, vt
-        check_s += time.perf_counter() - t
+    info = {"rounds": 0, "reverted_vertices": 0, "edge_flips": edge_flips, "relocated_vertices": relocated}
+    if info_repair is not None:
+        info["repair_check"] = info_repair
     return _Out(V=V, F=F, src_vertex=src_vertex, region=region, src_tri=src_tri, tri_uvs=tri_uvs, fixed=fixed,
-                lib_seconds=raw.lib_seconds, fit_seconds=fit_s, fit_info=info, notes=list(raw.notes),
-                flipped=flipped, voted_for=voted, check_seconds=check_s,
+                lib_seconds=raw.lib_seconds, fit_seconds=0.0, fit_info=info, notes=list(raw.notes),
+                flipped=fr.flipped, check_seconds=check_s, flip=fr,
                 new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex))
 
 
-def _edge_flip_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, region: np.ndarray,
-                      tri_uvs: np.ndarray | None, src_tri: np.ndarray | None, flipped: np.ndarray,
-                      voted: np.ndarray, limit: int = 256) -> int:
+def _fit(prep: _Prepared, out: _Out, cfg: SimplifyConfig, index_a: SurfaceIndex, fit_points: np.ndarray | None,
+         scale: float, flip_cache: dict) -> _Out:
+    """Refit the free vertices of a result (bake/mesh/simplify_fit.py); the fit is kept only if
+    it adds no flipped triangle (corners of any it turns are put back first) and the measured
+    error (max and mean) does not grow. The error measure taken here is the stage's own, kept on
+    the result (``out.h``): the stage does not measure it again."""
+    if cfg.fit_iterations <= 0 or fit_points is None or len(out.F) == 0:
+        return out
+    V, F, fr, fixed = out.V, out.F, out.flip, out.fixed
+    info = dict(out.fit_info)
+
+    def err(Vc: np.ndarray) -> HausdorffResult:
+        return hausdorff(prep.V, prep.F, Vc, F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
+
+    def check(Vc: np.ndarray, prev: FlipResult) -> FlipResult:
+        ff = flip_check(index_a, Vc, F, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale, prev=prev)
+        flip_cache["last"] = ff
+        flip_cache["checked"] = flip_cache.get("checked", 0) + ff.checked
+        return ff
+
+    t = time.perf_counter()
+    Vf, fit_info = refit(V, F, fixed, index_a, fit_points, iterations=cfg.fit_iterations,
+                         samples_b=min(cfg.error_samples, 20000), seed=cfg.seed)
+    info.update(fit_info)
+    fit_s = time.perf_counter() - t
+    t = time.perf_counter()
+    # the fit must not turn a triangle against the original surface: put back the corners
+    # of any triangle it flipped, and check again (only the triangles that moved)
+    ff = fr
+    for _ in range(6):
+        ff = check(Vf, ff)
+        new = ff.flipped & ~fr.flipped
+        if not new.any():
+            break
+        back = np.unique(F[new].ravel())
+        moved = back[(Vf[back] != V[back]).any(axis=1)]
+        if len(moved) == 0:
+            break
+        info["reverted_vertices"] = info.get("reverted_vertices", 0) + int(len(moved))
+        Vf[moved] = V[moved]
+    else:
+        ff = check(Vf, ff)
+    keep_fit = not (ff.flipped & ~fr.flipped).any()  # else: could not be repaired vertex by vertex
+    h = None
+    if keep_fit:
+        # the fit works from approximate closest points; keep it only where it measurably
+        # helps (on CAD-like meshes with slivers the correspondences can mislead it)
+        h0 = err(V)
+        h1 = err(Vf)
+        keep_fit = h1.max <= h0.max and h1.mean <= h0.mean
+        info["kept"] = bool(keep_fit)
+        h = h1 if keep_fit else h0
+    else:
+        info["abandoned"] = True
+    if keep_fit:
+        V, fr = Vf, ff
+    return replace(out, V=V, flipped=fr.flipped, flip=fr, fit_seconds=fit_s, fit_info=info, h=h,
+                   check_seconds=out.check_seconds + time.perf_counter() - t)
+
+
+def _edge_flip_repair(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.ndarray | None,
+                      fr: FlipResult, limit: int = 256) -> int:
     """Turn the shared edge of a flipped triangle and a neighbour (in place) when both new
     triangles then face the way the input surface under the pair does. Only edges inside one
     region and off UV seams are turned, so materials and UVs stay valid. Works on the few
     flipped triangles only (at most ``limit``). Returns how many edges were turned."""
-    a_norm = triangle_normals(prep.V, prep.F)
-    a_area = np.linalg.norm(np.cross(prep.V[prep.F[:, 1]] - prep.V[prep.F[:, 0]],
-                                     prep.V[prep.F[:, 2]] - prep.V[prep.F[:, 0]]), axis=1)
-    ref = np.zeros((len(F), 3))
-    ok = voted >= 0
-    np.add.at(ref, voted[ok], a_norm[ok] * a_area[ok, None])
+    flipped, ref = fr.flipped, fr.ref
     # directed edge -> triangle
     n = max(int(F.max()) + 1, 1)
     d_key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
@@ -546,17 +585,13 @@ def _edge_flip_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, region: np.
     return turned
 
 
-def _relocate_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, fixed: np.ndarray, flipped: np.ndarray,
-                     voted: np.ndarray, index_a: SurfaceIndex, limit: int = 256) -> int:
+def _relocate_repair(V: np.ndarray, F: np.ndarray, fixed: np.ndarray, fr: FlipResult, index_a: SurfaceIndex,
+                     limit: int = 256) -> int:
     """Unfold a flipped triangle by moving one of its free corners (in place) to the centre of
     its neighbours, put back onto the input surface (closest point), when every triangle
     around that corner then faces the way the input under it does. Returns vertices moved."""
-    a_norm = triangle_normals(prep.V, prep.F)
-    a_area = np.linalg.norm(np.cross(prep.V[prep.F[:, 1]] - prep.V[prep.F[:, 0]],
-                                     prep.V[prep.F[:, 2]] - prep.V[prep.F[:, 0]]), axis=1)
-    ref = np.zeros((len(F), 3))
-    ok = voted >= 0
-    np.add.at(ref, voted[ok], a_norm[ok] * a_area[ok, None])
+    flipped = fr.flipped
+    ref = fr.ref.copy()
     no_vote = np.linalg.norm(ref, axis=1) == 0
     ref[no_vote] = np.cross(V[F[no_vote, 1]] - V[F[no_vote, 0]], V[F[no_vote, 2]] - V[F[no_vote, 0]])
     ref[flipped & no_vote] *= -1.0
@@ -591,6 +626,33 @@ def _relocate_repair(prep: _Prepared, V: np.ndarray, F: np.ndarray, fixed: np.nd
     return moved
 
 
+def _repair_cost(index_a: SurfaceIndex, V0: np.ndarray, F0: np.ndarray, V1: np.ndarray, F1: np.ndarray
+                 ) -> tuple[float, float]:
+    """Two-sided error of a repaired result (V1, F1) and of what it was before (V0, F0; same
+    triangle count), over the triangles the repair changed and the ring around them: points on
+    those triangles against the input, and the input vertices under them against those
+    triangles (KD-tree bounds, the same for both). Cheap: a repair touches a few triangles."""
+    changed = np.flatnonzero((V0[F0] != V1[F1]).any(axis=(1, 2)))
+    if len(changed) == 0:
+        return 0.0, 0.0
+    verts = np.unique(np.concatenate([F0[changed].ravel(), F1[changed].ravel()]))
+    ring = np.flatnonzero(np.isin(F0, verts).any(axis=1) | np.isin(F1, verts).any(axis=1))
+    tid, bary = triangle_pattern(np.full(len(ring), 7, np.int64))
+    pts, under = [], []
+    for Vx, Fx in ((V0, F0[ring]), (V1, F1[ring])):
+        C = Vx[Fx]
+        P = np.concatenate([np.einsum("nk,nkd->nd", bary, C[tid]), C.reshape(-1, 3)])
+        d, t = index_a.distance(P)
+        pts.append(d)
+        under.append(t)
+    qa = index_a.V[np.unique(index_a.F[np.concatenate(under)].ravel())]
+    out = []
+    for (Vx, Fx), d_ba in zip(((V0, F0[ring]), (V1, F1[ring])), pts):
+        d_ab, _ = SurfaceIndex(Vx, Fx, density=0).distance(qa)
+        out.append(max(float(d_ba.max()), float(d_ab.max())))
+    return out[0], out[1]
+
+
 def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.ndarray) -> np.ndarray:
     """Output triangles on an edge used by more than two triangles, where the input vertices
     the edge's ends come from were not such an edge in the input."""
@@ -615,27 +677,72 @@ def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.nd
     return bad
 
 
+def _peaks(h, scale: float, most: int = _REFINE_PEAKS, share: float = 0.8, spacing: float = 0.02) -> np.ndarray:
+    """Where the error peaks: the worst point and up to ``most - 1`` more of the verified
+    largest distances within ``share`` of the maximum, at least ``spacing`` of the diagonal
+    apart (a few dozen points at most: a loop over them is cheap)."""
+    if h.top_points is None or len(h.top_points) == 0:
+        return np.asarray(h.worst_point, np.float64)[None]
+    pts = h.top_points[h.top_dists >= share * h.top_dists[0]]
+    keep = [pts[0]]
+    for p in pts[1:]:
+        if len(keep) >= most:
+            break
+        if np.linalg.norm(np.asarray(keep) - p, axis=1).min() >= spacing * scale:
+            keep.append(p)
+    return np.asarray(keep)
+
+
 def _defects(out: _Out) -> int:
     return int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
 
 
-def _lock_under(prep: _Prepared, out: _Out) -> np.ndarray:
+def _lock_under(prep: _Prepared, out: _Out, index_a: SurfaceIndex, lock: np.ndarray) -> np.ndarray:
     """For each flipped output triangle (or one on a new non-manifold edge), the input vertex
-    under it closest to its centre (the input triangles that stand under it are those whose
-    centroid it is closest to)."""
+    under it closest to its centre that is neither kept already (an output vertex's source)
+    nor locked: a corner of the input triangles within its bounding sphere whose centroid is
+    closest to it (or of any within the sphere, if none is)."""
     add = np.zeros(len(prep.V), bool)
     bad = np.flatnonzero(out.flipped | out.new_nonmanifold)
-    under = np.flatnonzero(np.isin(out.voted_for, bad))
-    if len(under) == 0:
-        add[out.src_vertex[out.F[bad].ravel()]] = True
+    if len(bad) == 0:
         return add
-    cand_v = prep.F[under].ravel()
-    cand_t = np.repeat(out.voted_for[under], 3)
-    cen = out.V[out.F[cand_t]].mean(axis=1)
-    d = np.linalg.norm(prep.V[cand_v] - cen, axis=1)
-    order = np.lexsort((cand_v, d, cand_t))
-    first = np.r_[True, cand_t[order][1:] != cand_t[order][:-1]]
-    add[cand_v[order][first]] = True
+    C = out.V[out.F[bad]]
+    cen = C.mean(axis=1)
+    rad = np.sqrt(((C - cen[:, None, :]) ** 2).sum(axis=2).max(axis=1))
+    rows, tris = index_a.near(cen, rad)
+    if len(rows):
+        # prefer the input triangles that stand under it (whose centroid is closest to it)
+        _, closest = SurfaceIndex(out.V, out.F, seed=13, density=0).distance(index_a.centers[tris])
+        own = closest == bad[rows]
+        has_own = np.zeros(len(bad), bool)
+        has_own[rows[own]] = True
+        keep = own | ~has_own[rows]
+        rows, tris = rows[keep], tris[keep]
+    rows = np.repeat(rows, 3)
+    cand = prep.F[tris].ravel()
+    taken = lock.copy()
+    taken[out.src_vertex] = True
+    ok = ~taken[cand]
+    rows, cand = rows[ok], cand[ok]
+    done = np.zeros(len(bad), bool)
+    if len(cand):
+        d = np.linalg.norm(prep.V[cand] - cen[rows], axis=1)
+        order = np.lexsort((cand, d, rows))
+        rows, cand = rows[order], cand[order]
+        # one vertex per bad triangle, distinct where possible: a vertex two triangles want
+        # goes to the lower-numbered one, the other takes its next closest (a few passes)
+        for _ in range(4):
+            live = ~done[rows] & ~add[cand]
+            r, c = rows[live], cand[live]
+            if len(r) == 0:
+                break
+            first = np.r_[True, r[1:] != r[:-1]]
+            r, c = r[first], c[first]
+            _, win = np.unique(c, return_index=True)
+            add[c[win]] = True
+            done[r[win]] = True
+    missing = np.flatnonzero(~done)
+    add[out.src_vertex[out.F[bad[missing]].ravel()]] = True
     return add
 
 
@@ -721,13 +828,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         rec.seconds = time.perf_counter() - t0
         return scene, rec
 
-    index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed)
-    prep.ambiguous = flip_votes(prep.V, prep.F, prep.V, prep.F, 1e-6 * scale, index_a,
-                                samples=cfg.error_samples)[0]
-    if prep.ambiguous.any():
-        details["flip_check_ignored_input_triangles"] = int(prep.ambiguous.sum())
-        notes.append(f"{int(prep.ambiguous.sum())} input triangle(s) overlap opposite-facing surface (double-sided "
-                     "or internal faces); the flip check does not count them")
+    index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed, scale=scale)
     fit_points = None
     if cfg.fit_iterations > 0:
         rng = np.random.default_rng(cfg.seed + 3)
@@ -742,6 +843,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     protect = edge_mask | _nonmanifold_vertices(prep.F, len(prep.V))
 
     repair_log: list[dict] = []
+    flip_cache: dict = {}  # the last flip check (verdicts are per triangle: reused across attempts)
 
     cap = float(cfg.error_ceiling) * scale if kind == "triangles" else 0.0
 
@@ -752,13 +854,14 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         best = None
         for rnd in range(rounds + 1):
             raw = _run(prep, method, target, cfg, lock, cap)
-            out = _finish(prep, raw, cfg, index_a, fit_points, protect, scale)
+            out = _fit(prep, _finish(prep, raw, cfg, index_a, protect, scale, flip_cache), cfg, index_a, fit_points,
+                       scale, flip_cache)
             n_flip = int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
             if best is None or n_flip < int(best.flipped.sum()) + int(best.new_nonmanifold.sum()):
                 best = out
             if n_flip == 0 or rnd == rounds:
                 break
-            add = _lock_under(prep, out)
+            add = _lock_under(prep, out, index_a, lock)
             if not (add & ~lock).any():
                 break
             lock |= add
@@ -768,7 +871,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         return best
 
     def measure(out: _Out):
-        return hausdorff(prep.V, prep.F, out.V, out.F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
+        if out.h is not None:  # measured by _fit with these very samples, or before
+            return out.h
+        out.h = hausdorff(prep.V, prep.F, out.V, out.F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
+        return out.h
 
     probes: list[dict] = []
     if kind == "triangles":
@@ -798,8 +904,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             wlock = np.zeros(len(prep.V), bool)
             last = h
             for _ in range(cfg.refine_rounds):
-                _, wt, _ = index_a.query(last.worst_point[None])
-                wlock[prep.F[wt[0]]] = True
+                _, wt, _ = index_a.query(_peaks(last, scale))
+                wlock[prep.F[wt]] = True
                 o2 = attempt(target, wlock)
                 hw = measure(o2)
                 keep = bool(hw.max < h.max and _defects(o2) <= _defects(out)
@@ -878,10 +984,12 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "fit_seconds": round(out.fit_seconds, 6),
         "check_seconds": round(out.check_seconds, 6),
         "flip_repairs": repair_log,
+        "flip_checked_triangles": int(flip_cache.get("checked", 0)),
         "fit": out.fit_info,
         "error_samples": int(cfg.error_samples) if h is not None else 0,
-        "error_metric": "symmetric Hausdorff over all vertices + area-weighted samples, exact point-triangle "
-                        "distances (bake/mesh/simplify_error.py); fractions of the bbox diagonal",
+        "error_metric": "symmetric Hausdorff over all vertices + area-weighted samples; distances to the "
+                        "closest of k KD-tree candidate triangles (upper bounds), the max verified exact "
+                        "(bake/mesh/simplify_error.py); fractions of the bbox diagonal",
         "worst_point": None if h is None else [float(x) for x in h.worst_point],
         "topology_in": topo_in, "topology_out": topo_out,
         "material_edges_in": int(len(region_edges)), "material_edges_out": int(len(out_region_edges)),

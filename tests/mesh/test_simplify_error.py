@@ -1,0 +1,226 @@
+"""The simplify stage's measuring tools against independent references.
+
+* distances: trimesh's own point-triangle closest point (``trimesh.triangles.closest_point``),
+  evaluated brute force over every (point, triangle) pair of small meshes;
+* flips: meshes whose orientation is known by construction (flat CAD-like panels
+  retriangulated, a triangle folded over on purpose, coincident double-sided faces).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from bake.mesh.simplify_error import (SurfaceIndex, flip_check, hausdorff, reliable_normals, sample_surface,
+                                      triangle_normals)
+
+
+def brute_distance(P: np.ndarray, V: np.ndarray, F: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """Exact distance from each point to the mesh: trimesh's closest point on every triangle."""
+    tris = V[F]
+    out = np.empty(len(P))
+    for s in range(0, len(P), chunk):
+        p = P[s:s + chunk]
+        pp = np.repeat(p, len(F), axis=0)
+        tt = np.tile(tris, (len(p), 1, 1))
+        q = trimesh.triangles.closest_point(tt, pp)
+        out[s:s + chunk] = np.linalg.norm(q - pp, axis=1).reshape(len(p), len(F)).min(axis=1)
+    return out
+
+
+def bumpy(sub: int, amp: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    m = trimesh.creation.icosphere(subdivisions=sub)
+    V = np.asarray(m.vertices, np.float64)
+    r = 1.0 + amp * np.sin(3 * V[:, 0]) * np.cos(4 * V[:, 1]) + 0.05 * np.sin(5 * V[:, 2])
+    return V * r[:, None], np.asarray(m.faces, np.int64)
+
+
+def grid(n: int, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """A flat n x n quad grid in the plane z, normals +z."""
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    V = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
+    i = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return V, F
+
+
+# --------------------------------------------------------------------------- distances
+def test_index_distances_are_upper_bounds_and_exact_is_exact():
+    Va, Fa = bumpy(2)  # 320 triangles
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(600, 3)) * 0.7
+    P = np.concatenate([P, Va[Fa].mean(axis=1)[:100] * 1.01])
+    ref = brute_distance(P, Va, Fa)
+    idx = SurfaceIndex(Va, Fa, seed=1)
+    d, tri = idx.distance(P)
+    assert np.all(d >= ref - 1e-12)
+    assert np.mean(np.abs(d - ref) <= 1e-12) > 0.97  # k-candidate bounds are almost always exact
+    dq, tq, cp = idx.query(P)
+    assert np.array_equal(dq, d) and np.array_equal(tq, tri)
+    assert np.allclose(np.linalg.norm(cp - P, axis=1), d, rtol=1e-9, atol=1e-12)
+    de, te = idx.exact(P, d)
+    np.testing.assert_allclose(de, ref, rtol=1e-10, atol=1e-12)
+
+
+def test_sampled_hausdorff_is_exact_at_its_points():
+    """Over the seeded query points (every vertex plus the samples) the reported max is at least
+    the brute-force max, and the reported peaks (including those found by the dense pattern on
+    the worst triangles) are exact distances; the mean is the brute-force mean up to the sample
+    spacing."""
+    Va, Fa = bumpy(3)  # 1280 triangles
+    Vb, Fb = bumpy(1)  # 80 triangles, same shape, coarse
+    n = 1500
+    h = hausdorff(Va, Fa, Vb, Fb, samples=n, seed=4)
+    # the same points hausdorff uses (same generators)
+    pa, _, _ = sample_surface(Va, Fa, n, np.random.default_rng([4, 0]))
+    pb, _, _ = sample_surface(Vb, Fb, n, np.random.default_rng([4, 1]))
+    ab = brute_distance(np.concatenate([pa, Va]), Vb, Fb)
+    ba = brute_distance(np.concatenate([pb, Vb]), Va, Fa)
+    assert h.max_a_to_b >= ab.max() * (1 - 1e-12)
+    assert h.max_b_to_a >= ba.max() * (1 - 1e-12)
+    assert h.max == pytest.approx(max(h.max_a_to_b, h.max_b_to_a), rel=1e-15)
+    # the peaks are exact distances to the other surface (a peak lies on one surface, so its
+    # distance to that one is zero), largest first
+    exact = np.maximum(brute_distance(h.top_points, Va, Fa), brute_distance(h.top_points, Vb, Fb))
+    np.testing.assert_allclose(h.top_dists, exact, rtol=1e-9, atol=1e-12)
+    assert h.top_dists[0] == pytest.approx(h.max, rel=1e-12) and np.all(np.diff(h.top_dists) <= 0)
+    # the max is not above the true (continuous) Hausdorff distance: brute force over a dense grid
+    # of barycentric points on both surfaces plus the vertices
+    g = 12
+    i, j = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
+    keep = i + j <= g
+    bary = np.stack([1 - (i[keep] + j[keep]) / g, i[keep] / g, j[keep] / g], 1)
+    dense_b = np.einsum("gk,tkd->tgd", bary, Vb[Fb]).reshape(-1, 3)
+    true_ba = brute_distance(dense_b, Va, Fa).max()
+    assert h.max_b_to_a <= true_ba * 1.02  # the grid itself is only a sample of the continuum
+    assert h.max_b_to_a >= 0.97 * true_ba  # the dense pattern on the worst triangles finds the peak
+    assert h.mean_a_to_b >= ab[:n].mean() - 1e-12 and h.mean_a_to_b == pytest.approx(ab[:n].mean(), rel=1e-3)
+    assert h.mean_b_to_a >= ba[:n].mean() - 1e-12 and h.mean_b_to_a == pytest.approx(ba[:n].mean(), rel=1e-3)
+
+
+# --------------------------------------------------------------------------- flips
+def test_flat_cad_panel_retriangulated_has_no_flips():
+    """A flat panel cut into a fine grid, against the same panel triangulated as a fan from one
+    corner, with slivers and a zero-area triangle on its border: no flips."""
+    Va, Fa = grid(12)
+    ia = SurfaceIndex(Va, Fa, scale=np.sqrt(2))
+    # output: border vertices of the unit square fanned from corner 0 (collinear corners give
+    # slivers and exactly-zero-area triangles)
+    t = np.linspace(0, 1, 13)
+    ring = np.concatenate([np.stack([t, 0 * t], 1), np.stack([0 * t[1:] + 1, t[1:]], 1),
+                           np.stack([t[::-1][1:], 0 * t[1:] + 1], 1), np.stack([0 * t[1:-1], t[::-1][1:-1]], 1)])
+    Vo = np.concatenate([ring, np.zeros((len(ring), 1))], axis=1)
+    Fo = np.stack([np.zeros(len(ring) - 2, np.int64), np.arange(1, len(ring) - 1), np.arange(2, len(ring))], 1)
+    res = flip_check(ia, Vo, Fo)
+    assert res.unreliable.any()  # the zero-area triangles along the first edges
+    assert not res.flipped.any()
+    # the same panel re-cut along the other diagonals
+    Fo2 = Fa.copy()
+    n = 12 * 12
+    quad = np.stack([Fa[:n, 0], Fa[:n, 1], Fa[:n, 2], Fa[n:, 2]], 1)
+    Fo2 = np.concatenate([quad[:, [0, 1, 3]], quad[:, [1, 2, 3]]])
+    assert not flip_check(ia, Va, Fo2).flipped.any()
+
+
+def test_cad_box_with_fanned_faces_has_no_flips():
+    box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    fine = box.subdivide().subdivide()
+    ia = SurfaceIndex(np.asarray(fine.vertices), np.asarray(fine.faces))
+    V = np.asarray(box.vertices)
+    F = np.asarray(box.faces)
+    # every face of the box as the other diagonal pair: coplanar, fanned differently
+    n = triangle_normals(V, F)
+    pairs = {}
+    for i, nn in enumerate(np.round(n, 6).tolist()):
+        pairs.setdefault(tuple(nn), []).append(i)
+    F2 = []
+    for (i, j) in pairs.values():
+        quad = list(dict.fromkeys(list(F[i]) + list(F[j])))  # 4 corners
+        c = V[quad].mean(axis=0)
+        nn = n[i]
+        # order the corners around the face normal, then split on the other diagonal
+        u = V[quad[0]] - c
+        w = np.cross(nn, u)
+        ang = np.arctan2((V[quad] - c) @ w, (V[quad] - c) @ u)
+        q = np.asarray(quad)[np.argsort(ang)]
+        F2 += [[q[1], q[2], q[3]], [q[1], q[3], q[0]]]
+    F2 = np.asarray(F2)
+    assert (np.einsum("ij,ij->i", triangle_normals(V, F2), V[F2].mean(axis=1)) > 0).all()  # outward by construction
+    assert not flip_check(ia, V, F2).flipped.any()
+    # and one face turned inside out is found, both of its triangles and nothing else
+    F3 = F2.copy()
+    F3[:2] = F3[:2, ::-1]
+    res = flip_check(ia, V, F3)
+    assert np.flatnonzero(res.flipped).tolist() == [0, 1]
+
+
+def test_folded_triangle_is_detected():
+    Va, Fa = bumpy(3)
+    ia = SurfaceIndex(Va, Fa)
+    Vo, Fo = bumpy(2)
+    assert not flip_check(ia, Vo, Fo).flipped.any()
+    # reverse one triangle's winding
+    F1 = Fo.copy()
+    F1[17] = F1[17, ::-1]
+    assert np.flatnonzero(flip_check(ia, Vo, F1).flipped).tolist() == [17]
+    # fold: move a vertex across the far edge of one of its triangles (point reflection
+    # through that edge's midpoint), so that triangle lies over its neighbour, turned over
+    # (independent check: on this star-shaped surface its normal now points inwards)
+    V2 = Vo.copy()
+    v = 5
+    t = int(np.flatnonzero((Fo == v).any(axis=1))[0])
+    a, b = [int(x) for x in Fo[t] if x != v]
+    V2[v] = Vo[a] + Vo[b] - Vo[v]
+    inward = np.einsum("ij,ij->i", triangle_normals(V2, Fo), V2[Fo].mean(axis=1)) < 0
+    assert inward[t]
+    res = flip_check(ia, V2, Fo)
+    assert np.array_equal(res.flipped, inward)
+
+
+def test_double_sided_faces_and_degenerate_input_are_not_flips():
+    V, F = grid(4)
+    # coincident opposite faces: both windings present in the original
+    Fa = np.concatenate([F, F[:, ::-1]])
+    ia = SurfaceIndex(V, Fa)
+    assert not flip_check(ia, V, F).flipped.any()
+    assert not flip_check(ia, V, F[:, ::-1]).flipped.any()
+    # zero-area input triangles (a collinear triple) have no say
+    Vz = np.concatenate([V, [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0]]])
+    Fz = np.concatenate([F, [[len(V), len(V) + 1, 0]]])
+    rel = reliable_normals(Vz, Fz, np.sqrt(2))
+    assert not rel[-1] and rel[:-1].all()
+
+
+def test_recheck_measures_only_changed_triangles_and_agrees_with_a_full_check():
+    Va, Fa = bumpy(3)
+    ia = SurfaceIndex(Va, Fa)
+    Vo, Fo = bumpy(2)
+    first = flip_check(ia, Vo, Fo)
+    V2 = Vo.copy()
+    V2[[3, 40]] *= -0.2  # two vertices pulled through the centre: their triangles turn over
+    again = flip_check(ia, V2, Fo, prev=first)
+    full = flip_check(ia, V2, Fo)
+    touched = np.isin(Fo, [3, 40]).any(axis=1)
+    assert again.checked == int(touched.sum()) < len(Fo)
+    assert np.array_equal(again.flipped, full.flipped) and again.flipped.any()
+    assert np.array_equal(again.ref, full.ref) and np.array_equal(again.under, full.under)
+
+
+def test_suspect_between_two_sheets_is_judged_by_what_it_stands_for():
+    """A triangle inside a thin slab, nearer its bottom sheet but standing for the finely cut
+    top (the original triangles it is closest to face up, as it does): the first pass suspects
+    it, the second opinion clears it. Turned over it faces the sheet it is nearest to, so the
+    first pass clears it: between two opposite sheets either way is defensible, and only a
+    triangle both views call flipped is flipped."""
+    Vt, Ft = grid(20, z=0.01)  # top, normals +z, 800 triangles
+    Vb, Fb = grid(1, z=-0.01)  # bottom, 2 triangles, turned to face -z
+    V = np.concatenate([Vt, Vb])
+    F = np.concatenate([Ft, Fb[:, ::-1] + len(Vt)])
+    ia = SurfaceIndex(V, F)
+    Vo, Fo = grid(1, z=-0.004)  # facing +z, 0.006 above the bottom, 0.014 below the top
+    res = flip_check(ia, Vo, Fo, samples=8000)
+    assert res.suspect.all() and not res.flipped.any()
+    res = flip_check(ia, Vo, Fo[:, ::-1], samples=8000)
+    assert not res.suspect.any() and not res.flipped.any()

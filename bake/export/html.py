@@ -222,18 +222,30 @@ def _textures_section(textures: list[dict]) -> str:
     return "".join(parts)
 
 
+def _faces(counts: dict) -> str:
+    """Triangles, or polygons before triangulation (import and transform see polygons)."""
+    t, p = counts.get("triangles", 0), counts.get("polygons", 0)
+    return f"{p:,} polygons" if not t and p else f"{t:,}"
+
+
+def _fmt_accuracy(key: str, v: Any) -> str:
+    """Distances the stages record as fractions of the diagonal read as a percentage."""
+    if key.startswith("hausdorff") and isinstance(v, float):
+        return f"{100 * v:.3g}% of the diagonal"
+    return _fmt(v)
+
+
 def _stages_section(report: dict) -> str:
     total = max(report.get("seconds") or 0.0, 1e-9)
     rows = []
     for st in report.get("stages", []):
         frac = st["seconds"] / total
-        cin = st["counts_in"].get("triangles", 0)
-        cout = st["counts_out"].get("triangles", 0)
-        acc = "<br>".join(f"{_esc(k)} {_esc(_fmt(v))}" for k, v in st.get("accuracy", {}).items())
+        cin, cout = _faces(st["counts_in"]), _faces(st["counts_out"])
+        acc = "<br>".join(f"{_esc(k)} {_esc(_fmt_accuracy(k, v))}" for k, v in st.get("accuracy", {}).items())
         warn = "<br>".join(_esc(w) for w in st.get("warnings", []))
         rows.append(f"<tr><td>{_esc(st['name'])}</td><td class=n>{st['seconds']:.3f}</td>"
                     f"<td><div class='bar ok' style='min-width:80px'><span style='width:{min(frac, 1) * 100:.1f}%'>"
-                    f"</span></div></td><td class=n>{cin:,}</td><td class=n>{cout:,}</td><td>{acc}</td>"
+                    f"</span></div></td><td class=n>{cin}</td><td class=n>{cout}</td><td>{acc}</td>"
                     f"<td>{warn}</td></tr>")
     eff = []
     for e in report.get("effects", []):
@@ -245,7 +257,7 @@ def _stages_section(report: dict) -> str:
         cls = "" if e.get("ran") else " class=skip"
         eff.append(f"<tr{cls}><td>{_esc(e['name'])}</td><td>{'ran' if e.get('ran') else 'skipped'}</td>"
                    f"<td>{_esc(e.get('reason', ''))}{_esc(extra)}</td></tr>")
-    return (f"<h2>Stages</h2><table><tr><th>stage</th><th>seconds</th><th>share</th><th>triangles in</th>"
+    return (f"<h2>Stages</h2><table><tr><th>stage</th><th>seconds</th><th>share</th><th>faces in</th>"
             f"<th>out</th><th>accuracy</th><th>warnings</th></tr>{''.join(rows)}</table>"
             f"<h2>Effects and stages: run and skipped</h2><table><tr><th>effect</th><th></th><th>why / cost</th>"
             f"</tr>{''.join(eff)}</table>")

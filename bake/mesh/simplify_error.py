@@ -19,9 +19,12 @@ Every reported distance is an upper bound of the true one, exact unless the clos
 is neither a candidate nor reached by the walk (on the bunny at 10% and 1%: 0.2% of the query
 points; the mean is 7e-4 and 2e-4 above the exact mean over the same points). The maximum of each
 direction is then *verified*: the largest bounds are replaced, 64 at a time down the sorted
-bounds, by exact distances (every triangle whose bounding sphere comes within the bound, found
+bounds, by exact distances (64, then doubling blocks; every triangle whose bounding sphere comes within the bound, found
 with a ball query over the centroids) until the largest exact value is at least every bound
-left. So the max is exact over the query points. Random samples rarely hit the worst spot
+left. So the max is exact over the query points (unless the verification needs more than
+1.5M point-triangle pairs, as on soups of large intersecting triangles whose bounds are loose:
+the max is then the largest bound left, an upper bound, and ``HausdorffResult.exact`` is
+False). Random samples rarely hit the worst spot
 of a large triangle, so the max is then sharpened: a fixed pattern of 128 points on each of the
 (at most 32) triangles where the largest distances were found is measured and verified too (on
 the bunny at 1%: 1.682% of the diagonal, against 1.458% from the 20,000 samples alone and
@@ -77,6 +80,12 @@ _DENSE = 128
 _BRUTE = 8
 # query points handled per chunk (bounds the temporaries: ~16 floats per point-triangle pair)
 _CHUNK = 1 << 16
+# KD-tree queries of fewer points than this run on one thread (starting threads costs more)
+_THREADED = 4096
+# exact point-triangle pairs one verification of a maximum may measure (the bunny at 1% needs
+# under 3,000; a soup of large intersecting triangles, whose candidate bounds are loose, needs
+# millions: past this budget the max is reported as the largest bound left, an upper bound)
+_VERIFY_PAIRS = 1_500_000
 # a triangle whose double area is below this fraction of the squared bbox diagonal (or whose
 # largest angle has a sine below _SLIVER_SINE) has no reliable normal
 _AREA_TOL = 1e-12
@@ -303,7 +312,7 @@ class SurfaceIndex:
             return cand, d2.reshape(m, T)
         k = int(min(self.k, len(self.points)))
         z = np.argsort(_morton(P, self._lo, self._span))
-        _, nb = self.tree.query(P[z], k=k, workers=-1)
+        _, nb = self.tree.query(P[z], k=k, workers=-1 if m >= _THREADED else 1)
         cand = np.empty((m, k), np.int64)
         cand[z] = self.owner[nb.reshape(m, k)]
         cand.sort(axis=1)
@@ -425,15 +434,19 @@ class SurfaceIndex:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         R, small, ctree, big = self._ball_index()
         reach = radius + R
-        # every small triangle whose centroid is within reach: the K nearest within reach,
-        # K growing for the points that had K
+        # every small triangle whose centroid is within reach: the K nearest within reach
+        # (K = 32, then 1024 for the points that had K); points whose ball holds more than that
+        # take every small triangle (the sphere test below is cheaper than a KD-tree query for
+        # thousands of neighbours, which is what soups of big overlapping triangles ask)
         rows_l, tris_l = [], []
         todo = np.arange(len(P))
-        K = 32
-        while len(todo):
+        for K in (32, 1024):
+            if len(todo) == 0:
+                break
             K = min(K, len(small))
             rt = reach[todo]
-            dd, ii = ctree.query(P[todo], k=K, distance_upper_bound=float(rt.max()) * (1 + 1e-12), workers=-1)
+            dd, ii = ctree.query(P[todo], k=K, distance_upper_bound=float(rt.max()) * (1 + 1e-12),
+                                 workers=-1 if len(todo) >= _THREADED else 1)
             dd, ii = dd.reshape(len(todo), K), ii.reshape(len(todo), K)
             within = dd <= rt[:, None]
             full = within[:, -1] & (K < len(small))
@@ -442,7 +455,9 @@ class SurfaceIndex:
             rows_l.append(todo[r])
             tris_l.append(small[ii[r, c]])
             todo = todo[full]
-            K *= 4
+        if len(todo):
+            rows_l.append(np.repeat(todo, len(small)))
+            tris_l.append(np.tile(small, len(todo)))
         rows = np.concatenate(rows_l)
         tris = np.concatenate(tris_l)
         if len(big):
@@ -452,28 +467,48 @@ class SurfaceIndex:
         sel = lb <= radius[rows] * (1 + 1e-12) + 1e-300
         return rows[sel], tris[sel]
 
-    def exact(self, P: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def near_chunks(self, P: np.ndarray, radius: np.ndarray, max_pairs: int = 1 << 22):
+        """:meth:`near` over consecutive chunks of the points, sized so a chunk yields about
+        ``max_pairs`` pairs (measured on the chunk before): yields (first point of the chunk,
+        rows within the chunk, triangles). Keeps memory bounded where balls are large (soups of
+        big overlapping triangles put every triangle within reach of every point)."""
+        P = np.asarray(P, np.float64).reshape(-1, 3)
+        radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
+        i, step = 0, 64
+        while i < len(P):
+            rows, tris = self.near(P[i:i + step], radius[i:i + step])
+            yield i, rows, tris
+            per = max(len(rows) / max(min(step, len(P) - i), 1), 1.0)
+            i += step
+            step = int(np.clip(max_pairs / per, 1, 1 << 16))
+
+    def exact(self, P: np.ndarray, upper: np.ndarray, stats: dict | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
         """Exact distances and closest triangles for a few points, given upper bounds: every
         triangle whose bounding sphere (centroid, radius) comes within ``upper`` of a point is
         measured. Small triangles are found with a ball query over their centroids, the few
-        largest (radius above the 99th percentile) are always measured."""
+        largest (radius above the 99th percentile) are always measured. ``stats["pairs"]`` (if
+        given) is increased by the point-triangle pairs measured."""
         P = np.asarray(P, np.float64).reshape(-1, 3)
         dist = np.asarray(upper, np.float64).copy()
         tri = np.full(len(P), -1, np.int64)
         if self.tree is None or len(P) == 0:
             return dist, tri
-        rows, tris = self.near(P, dist)
-        for s in range(0, len(rows), 1 << 20):
-            r, t = rows[s:s + (1 << 20)], tris[s:s + (1 << 20)]
-            d = np.sqrt(_pair_dist2(P[r], np.take(self.table, t, axis=1)))
-            # lowest distance per row; ties -> lowest triangle id (deterministic)
-            order = np.lexsort((t, d, r))
-            r, t, d = r[order], t[order], d[order]
-            first = np.r_[True, r[1:] != r[:-1]]
-            r, t, d = r[first], t[first], d[first]
-            upd = d <= dist[r]
-            dist[r[upd]] = d[upd]
-            tri[r[upd]] = t[upd]
+        for i0, rows, tris in self.near_chunks(P, dist.copy()):
+            if stats is not None:
+                stats["pairs"] = stats.get("pairs", 0) + len(rows)
+            rows = rows + i0
+            for s in range(0, len(rows), 1 << 20):
+                r, t = rows[s:s + (1 << 20)], tris[s:s + (1 << 20)]
+                d = np.sqrt(_pair_dist2(P[r], np.take(self.table, t, axis=1)))
+                # lowest distance per row; ties -> lowest triangle id (deterministic)
+                order = np.lexsort((t, d, r))
+                r, t, d = r[order], t[order], d[order]
+                first = np.r_[True, r[1:] != r[:-1]]
+                r, t, d = r[first], t[first], d[first]
+                upd = (d < dist[r]) | ((d == dist[r]) & ((tri[r] < 0) | (t < tri[r])))
+                dist[r[upd]] = d[upd]
+                tri[r[upd]] = t[upd]
         return dist, tri
 
 
@@ -492,6 +527,10 @@ class HausdorffResult:
     # first, and where they are: where the error peaks (the refine rounds keep input there)
     top_points: np.ndarray | None = None
     top_dists: np.ndarray | None = None
+    # False when verifying the max ran out of its work budget (_VERIFY_PAIRS): ``max`` is then an
+    # upper bound of the true max over the query points (loose candidate bounds: soups of large
+    # intersecting triangles)
+    exact: bool = True
 
 
 def _query_points(V: np.ndarray, F: np.ndarray, samples: int, seed, index: SurfaceIndex | None = None
@@ -511,23 +550,38 @@ def _query_points(V: np.ndarray, F: np.ndarray, samples: int, seed, index: Surfa
     return out
 
 
-def _verify(Q: np.ndarray, d: np.ndarray, index: SurfaceIndex) -> np.ndarray:
-    """Make the largest upper bounds ``d`` (in place) exact, in blocks of 64 down the sorted
-    bounds, until the largest exact value is at least every bound left (every other point's
-    true distance is below its bound, so below it). Returns the verified points, largest
-    first."""
-    order = np.argsort(-d)
+def _verify(Q: np.ndarray, d: np.ndarray, index: SurfaceIndex, budget: int = _VERIFY_PAIRS
+            ) -> tuple[np.ndarray, bool]:
+    """Make the largest upper bounds ``d`` (in place) exact, in blocks down the sorted bounds
+    (64 points, doubling to 4096), until the largest exact value is at least every bound left
+    (every other point's true distance is below its bound, so below it). Returns the verified
+    points, largest first, and whether that max is exact: when the blocks have measured more
+    than ``budget`` point-triangle pairs the rest stays unverified, and the point with the
+    largest bound left is put first among them if its bound exceeds every exact value (the
+    reported max is then an upper bound of the true max over the points)."""
+    order = np.argsort(-d, kind="stable")
     best = -1.0
-    done = 0
-    for s in range(0, len(order), 64):
-        blk = order[s:s + 64]
+    done, size = 0, 64
+    stats: dict = {}
+    exact = True
+    while done < len(order):
+        blk = order[done:done + size]
         if best >= d[blk[0]]:
             break
-        d[blk], _ = index.exact(Q[blk], d[blk])
+        if stats.get("pairs", 0) > budget:
+            exact = False
+            break
+        d[blk], _ = index.exact(Q[blk], d[blk], stats)
         best = max(best, float(d[blk].max()))
-        done = s + len(blk)
+        done += len(blk)
+        size = min(2 * size, 4096)
     tops = order[:done]
-    return tops[np.argsort(-d[tops], kind="stable")]
+    tops = tops[np.argsort(-d[tops], kind="stable")]
+    if not exact:
+        rest = order[done]  # the largest bound not verified
+        if d[rest] > best:
+            tops = np.concatenate([[rest], tops])
+    return tops, exact
 
 
 def _directed(Q: np.ndarray, n_samples: int, where: np.ndarray, Vq: np.ndarray, Fq: np.ndarray,
@@ -538,10 +592,10 @@ def _directed(Q: np.ndarray, n_samples: int, where: np.ndarray, Vq: np.ndarray, 
     the (at most 32) triangles where the largest distances were found are measured too (the
     random samples rarely hit the worst spot of a large triangle; they are not in the mean)."""
     if len(Q) == 0:
-        return 0.0, 0.0, np.zeros(3), np.zeros((0, 3)), np.zeros(0)
+        return 0.0, 0.0, np.zeros(3), np.zeros((0, 3)), np.zeros(0), True
     all_d, _ = index.distance(Q)
     mean = float(all_d[:n_samples].mean()) if n_samples else 0.0
-    tops = _verify(Q, all_d, index)
+    tops, exact = _verify(Q, all_d, index)
     P, D = Q[tops], all_d[tops]
     if dense > 0 and len(Fq):
         w = where[tops[:32]]
@@ -554,11 +608,12 @@ def _directed(Q: np.ndarray, n_samples: int, where: np.ndarray, Vq: np.ndarray, 
         tid, bary = triangle_pattern(np.full(len(tris), dense, np.int64))
         Pd = np.einsum("nk,nkd->nd", bary, Vq[Fq[tris[tid]]])
         dd, _ = index.distance(Pd)
-        td = _verify(Pd, dd, index)
+        td, ex = _verify(Pd, dd, index)
+        exact = exact and ex
         P, D = np.concatenate([P, Pd[td]]), np.concatenate([D, dd[td]])
         o = np.argsort(-D, kind="stable")
         P, D = P[o], D[o]
-    return float(D[0]), mean, P[0], P, D
+    return float(D[0]), mean, P[0], P, D, exact
 
 
 def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, samples: int = 20000,
@@ -576,13 +631,13 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     Vb = np.asarray(Vb, np.float64)
     Qa, na, wa = _query_points(ia.V, ia.F, samples, [seed, 0], ia)
     Qb, nb, wb = _query_points(Vb, Fb, samples, [seed, 1])
-    mab, meab, pab, tpa, tda = _directed(Qa, na, wa, ia.V, ia.F, ib)
-    mba, meba, pba, tpb, tdb = _directed(Qb, nb, wb, Vb, Fb, ia)
+    mab, meab, pab, tpa, tda, xa = _directed(Qa, na, wa, ia.V, ia.F, ib)
+    mba, meba, pba, tpb, tdb, xb = _directed(Qb, nb, wb, Vb, Fb, ia)
     worst = pab if mab >= mba else pba
     tp, td = np.concatenate([tpa, tpb]), np.concatenate([tda, tdb])
     order = np.argsort(-td, kind="stable")
     return HausdorffResult(max(mab, mba), 0.5 * (meab + meba), mab, mba, meab, meba, worst, samples,
-                           tp[order], td[order])
+                           tp[order], td[order], exact=bool(xa and xb))
 
 
 # --------------------------------------------------------------------------- topology checks
@@ -755,8 +810,8 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     C = res.corners[sus]
     cen = C.mean(axis=1)
     rad = np.sqrt(((C - cen[:, None, :]) ** 2).sum(axis=2).max(axis=1))
-    _, orig = index_a.near(cen, rad + res.reach[sus] + tol)
-    orig = np.unique(orig)
+    orig = np.unique(np.concatenate([np.unique(t) for _, _, t in
+                                     index_a.near_chunks(cen, rad + res.reach[sus] + tol)]))
     orig = orig[index_a.reliable[orig]]
     if len(orig) == 0:
         res.flipped[sus] = True

@@ -139,6 +139,19 @@ def test_report_html_written_self_contained_and_every_image_decodes(baked):
     assert "http://" not in page and "https://" not in page and "<script" not in page
 
 
+def test_stage_table_counts_faces_and_reads_distances_as_percent(baked):
+    """Import and transform see polygons (no triangles yet): the table says so instead of 0;
+    Hausdorff distances (fractions of the diagonal in report.json) read as a percentage."""
+    _, out = baked
+    rep = json.loads((out / "report.json").read_text())
+    imp = next(st for st in rep["stages"] if st["name"] == "import")
+    assert imp["counts_out"].get("triangles", 0) == 0 and imp["counts_out"]["polygons"] > 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert f"<td class=n>{imp['counts_out']['polygons']:,} polygons</td>" in page
+    assert html_mod._fmt_accuracy("hausdorff_max", 0.003525) == "0.352% of the diagonal"
+    assert html_mod._fmt_accuracy("inflation", 0.5) == "0.5"
+
+
 def test_bar_colours_follow_how_close_a_limit_is():
     assert [html_mod.bar_class(f) for f in (0.0, 0.49, 0.5, 0.79, 0.8, 1.0, 1.01)] == \
         ["ok", "ok", "watch", "watch", "near", "near", "over"]

@@ -100,6 +100,52 @@ def test_sampled_hausdorff_is_exact_at_its_points():
     assert h.mean_b_to_a >= ba[:n].mean() - 1e-12 and h.mean_b_to_a == pytest.approx(ba[:n].mean(), rel=1e-3)
 
 
+def test_verification_out_of_budget_reports_an_upper_bound():
+    """Verification takes any upper bounds: given loose ones (the exact distances inflated by up
+    to 2x, as candidate bounds are on soups of big overlapping triangles) it makes the max exact
+    (brute force) with the default budget, and with a tiny budget stops early, says so, and
+    reports a value that is still never below the true max."""
+    from bake.mesh import simplify_error as E
+
+    Va, Fa = bumpy(2)
+    rng = np.random.default_rng(5)
+    Q = rng.normal(size=(3000, 3)) * 0.8
+    truth = brute_distance(Q, Va, Fa)
+    idx = SurfaceIndex(Va, Fa, seed=3)
+    loose = truth * (1.0 + rng.random(len(Q))) + 1e-9
+    d = loose.copy()
+    tops, exact = E._verify(Q, d, idx)
+    assert exact
+    assert d[tops[0]] == pytest.approx(truth.max(), rel=1e-12)
+    assert (loose > truth.max()).sum() > 64  # more than one block was needed
+    d = loose.copy()
+    tops, exact = E._verify(Q, d, idx, budget=10)
+    assert not exact
+    assert d[tops[0]] >= truth.max() * (1 - 1e-12)  # an upper bound of the true max
+    assert d[tops[0]] < loose.max()  # but the bounds did tighten: the loosest ones were verified
+
+
+def test_near_chunks_equal_one_query():
+    """Chunked ball queries give the same pairs as one query (balls of every size)."""
+    Va, Fa = bumpy(2)
+    idx = SurfaceIndex(Va, Fa, seed=1)
+    rng = np.random.default_rng(8)
+    P = rng.normal(size=(500, 3))
+    r = rng.random(500) ** 3 * 3.0
+    rows, tris = idx.near(P, r)
+    got = [(i0 + rr, tt) for i0, rr, tt in idx.near_chunks(P, r, max_pairs=2000)]
+    rows2 = np.concatenate([g[0] for g in got])
+    tris2 = np.concatenate([g[1] for g in got])
+    assert len(got) > 3
+    a = np.unique(np.stack([rows, tris], 1), axis=0)
+    b = np.unique(np.stack([rows2, tris2], 1), axis=0)
+    assert np.array_equal(a, b) and len(a) == len(rows)
+    # every pair is a triangle whose bounding sphere is within reach; none missing (brute force)
+    lb = np.linalg.norm(P[:, None, :] - idx.centers[None], axis=2) - idx.radii[None]
+    ref = np.argwhere(lb <= r[:, None] * (1 + 1e-12))
+    assert np.array_equal(np.unique(ref, axis=0), a)
+
+
 # --------------------------------------------------------------------------- flips
 def test_flat_cad_panel_retriangulated_has_no_flips():
     """A flat panel cut into a fine grid, against the same panel triangulated as a fan from one

@@ -64,8 +64,8 @@ from ..errors import ConfigError, StageError
 from ..record import StageRecord
 from ..scene import Scene
 from . import simplify_meshopt
-from .simplify_error import (FlipResult, HausdorffResult, SurfaceIndex, edge_counts, flip_check, hausdorff,
-                             sample_surface, topology, triangle_pattern)
+from .simplify_error import (FlipResult, HausdorffResult, SurfaceIndex, bounding_spheres, edge_counts, flip_check,
+                             hausdorff, sample_surface, topology, triangle_pattern)
 from .simplify_fit import refit
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
@@ -416,12 +416,7 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
     info_repair = None
 
     def check(Vc: np.ndarray, Fc: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
-        # only triangles not judged before (in this result or an earlier one) are measured
-        fr = flip_check(index_a, Vc, Fc, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale,
-                        prev=prev if prev is not None else flip_cache.get("last"))
-        flip_cache["last"] = fr
-        flip_cache["checked"] = flip_cache.get("checked", 0) + fr.checked
-        return fr
+        return _flip_check(index_a, Vc, Fc, cfg, scale, flip_cache, prev)
 
     fr = check(V, F)
     before = (V.copy(), F.copy(), None if tri_uvs is None else tri_uvs.copy(), fr) if fr.flipped.any() else None
@@ -459,6 +454,17 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
                 new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex))
 
 
+def _flip_check(index_a: SurfaceIndex, V: np.ndarray, F: np.ndarray, cfg: SimplifyConfig, scale: float,
+                flip_cache: dict, prev: FlipResult | None = None) -> FlipResult:
+    """The stage's flip check: only triangles not judged before (in ``prev``, else in the stage's
+    last check) are measured; the result becomes the stage's last check."""
+    fr = flip_check(index_a, V, F, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale,
+                    prev=prev if prev is not None else flip_cache.get("last"))
+    flip_cache["last"] = fr
+    flip_cache["checked"] = flip_cache.get("checked", 0) + fr.checked
+    return fr
+
+
 def _fit(prep: _Prepared, out: _Out, cfg: SimplifyConfig, index_a: SurfaceIndex, fit_points: np.ndarray | None,
          scale: float, flip_cache: dict) -> _Out:
     """Refit the free vertices of a result (bake/mesh/simplify_fit.py); the fit is kept only if
@@ -474,10 +480,7 @@ def _fit(prep: _Prepared, out: _Out, cfg: SimplifyConfig, index_a: SurfaceIndex,
         return hausdorff(prep.V, prep.F, Vc, F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
 
     def check(Vc: np.ndarray, prev: FlipResult) -> FlipResult:
-        ff = flip_check(index_a, Vc, F, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale, prev=prev)
-        flip_cache["last"] = ff
-        flip_cache["checked"] = flip_cache.get("checked", 0) + ff.checked
-        return ff
+        return _flip_check(index_a, Vc, F, cfg, scale, flip_cache, prev)
 
     t = time.perf_counter()
     Vf, fit_info = refit(V, F, fixed, index_a, fit_points, iterations=cfg.fit_iterations,
@@ -706,9 +709,7 @@ def _lock_under(prep: _Prepared, out: _Out, index_a: SurfaceIndex, lock: np.ndar
     bad = np.flatnonzero(out.flipped | out.new_nonmanifold)
     if len(bad) == 0:
         return add
-    C = out.V[out.F[bad]]
-    cen = C.mean(axis=1)
-    rad = np.sqrt(((C - cen[:, None, :]) ** 2).sum(axis=2).max(axis=1))
+    cen, rad = bounding_spheres(out.V[out.F[bad]])
     rows, tris = index_a.near(cen, rad)
     if len(rows):
         # prefer the input triangles that stand under it (whose centroid is closest to it)

@@ -72,7 +72,7 @@ from scipy.spatial import cKDTree
 
 __all__ = ["SurfaceIndex", "sample_surface", "point_triangle_distance", "hausdorff", "HausdorffResult",
            "triangle_normals", "triangle_areas", "topology", "edge_counts", "flip_check", "FlipResult",
-           "flipped_triangles", "reliable_normals", "triangle_pattern"]
+           "reliable_normals", "triangle_pattern", "bounding_spheres"]
 
 # points of a fixed pattern on each triangle where a Hausdorff direction peaked (sharpens the max)
 _DENSE = 128
@@ -121,6 +121,13 @@ def reliable_normals(V: np.ndarray, F: np.ndarray, scale: float) -> np.ndarray:
     dbl = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     longest = np.maximum(np.maximum(((b - a) ** 2).sum(1), ((c - a) ** 2).sum(1)), ((c - b) ** 2).sum(1))
     return (dbl > 2.0 * _AREA_TOL * scale * scale) & (dbl > _SLIVER_SINE * longest)
+
+
+def bounding_spheres(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Spheres around triangles given by their corners (T, 3, 3): centroids (T, 3) and the
+    distance to the farthest corner (T,)."""
+    cen = C.mean(axis=1)
+    return cen, np.sqrt(((C - cen[:, None, :]) ** 2).sum(axis=2).max(axis=1))
 
 
 def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator
@@ -254,7 +261,7 @@ class SurfaceIndex:
         self.table = _tri_table(tri_pts[:, 0], tri_pts[:, 1], tri_pts[:, 2])
         used = self.V[np.unique(self.F)]
         self.scale = float(np.linalg.norm(used.max(0) - used.min(0))) if scale is None else float(scale)
-        cent = tri_pts.mean(axis=1)
+        cent, self.radii = bounding_spheres(tri_pts)
         parts, owners = [cent], [np.arange(T)]
         if T <= 250_000:
             # points near each corner (inside the triangle, so each belongs to one owner)
@@ -277,7 +284,6 @@ class SurfaceIndex:
         self.owner = np.concatenate(owners)[order]
         self.tree = cKDTree(self.points, balanced_tree=False, compact_nodes=False)
         self.centers = cent
-        self.radii = np.sqrt(((tri_pts - cent[:, None, :]) ** 2).sum(axis=2).max(axis=1))
         self.area = 0.5 * np.linalg.norm(np.cross(tri_pts[:, 1] - tri_pts[:, 0], tri_pts[:, 2] - tri_pts[:, 0]),
                                          axis=1)
         self.total_area = float(self.area.sum())
@@ -328,20 +334,6 @@ class SurfaceIndex:
         inside = np.zeros(m * k, bool)
         inside[keep] = ins
         return cand, d2.reshape(m, k), inside.reshape(m, k)
-
-    def candidates(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(point index, candidate triangle, exact distance) for every distinct candidate pair."""
-        P = np.asarray(P, np.float64).reshape(-1, 3)
-        if self.tree is None or len(P) == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-        out_r, out_t, out_d = [], [], []
-        for s in range(0, len(P), _CHUNK):
-            cand, d2 = self._candidates(P[s:s + _CHUNK])
-            rows, cols = np.nonzero(cand >= 0)
-            out_r.append(rows + s)
-            out_t.append(cand[rows, cols])
-            out_d.append(np.sqrt(d2[rows, cols]))
-        return np.concatenate(out_r), np.concatenate(out_t), np.concatenate(out_d)
 
     def distance(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distances (n,), closest triangle (n,)): upper bounds, exact unless the KD-tree
@@ -807,9 +799,7 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     res.flipped[:] = False
     if len(sus) == 0:
         return
-    C = res.corners[sus]
-    cen = C.mean(axis=1)
-    rad = np.sqrt(((C - cen[:, None, :]) ** 2).sum(axis=2).max(axis=1))
+    cen, rad = bounding_spheres(res.corners[sus])
     orig = np.unique(np.concatenate([np.unique(t) for _, _, t in
                                      index_a.near_chunks(cen, rad + res.reach[sus] + tol)]))
     orig = orig[index_a.reliable[orig]]
@@ -837,10 +827,3 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     got = np.linalg.norm(votes, axis=1) > 0
     against = np.einsum("ij,ij->i", votes, n_out[:, sus].T) < 0.0
     res.flipped[sus] = ~got | against
-
-
-def flipped_triangles(Va: np.ndarray, Fa: np.ndarray, Vo: np.ndarray, Fo: np.ndarray, tolerance: float | None = None,
-                      index_a: SurfaceIndex | None = None, samples: int = 20000) -> np.ndarray:
-    """See :func:`flip_check`; only the mask."""
-    ia = index_a if index_a is not None else SurfaceIndex(Va, Fa)
-    return flip_check(ia, Vo, Fo, samples=samples, tol=tolerance).flipped

@@ -185,7 +185,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .export import check as check_mod
+    from .scratch import check as check_mod
 
     target = Path(args.target)
     if not target.exists():

@@ -41,6 +41,7 @@ from bake.config import LightConfig, LightingConfig, LightmapConfig, TexturesCon
 from bake.errors import StageError  # noqa: E402
 from bake.scene import make_scene  # noqa: E402
 from bake.lighting import lightmap as lighting_lightmap  # noqa: E402
+from bake.lighting.rays import Tracer  # noqa: E402
 from bake.textures import lightmap as lm  # noqa: E402
 from bake.textures import stage as tstage  # noqa: E402
 
@@ -103,9 +104,10 @@ def bench_machinery(resolutions, tmp: Path) -> list[dict]:
             cached = lm.unwrap(scene, cfg)
             t_cached = time.perf_counter() - t
             assert cached.cached and np.array_equal(cached.tri_uvs, atlas.tri_uvs)
-            out = lm.bake(scene, atlas, f, cfg)
+            tracer = Tracer(scene.positions, scene.triangles, threads=0, scale=scene.scale())
+            out = lm.bake(scene, atlas, f, cfg, tracer=tracer)
             all_seams = lm.seam_error(out.image, atlas, out.seams, smooth_only=False)
-            raw = lm.bake(scene, atlas, f, dataclasses.replace(cfg, stitch_seams=False))
+            raw = lm.bake(scene, atlas, f, dataclasses.replace(cfg, stitch_seams=False), tracer=tracer)
             all_raw = lm.seam_error(raw.image, atlas, raw.seams, smooth_only=False)
             t_, pts, uv = surface_points(scene, atlas, 20000)
             err = np.abs(lm.bilinear(out.image, uv) - f(pts, None, t_)).max(axis=1)

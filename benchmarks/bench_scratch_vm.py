@@ -44,10 +44,11 @@ sys.path.insert(0, str(REPO))
 from bake import config, pipeline  # noqa: E402
 from bake.bsp.traverse import draw_order  # noqa: E402
 from bake.bvh.traverse import trace_one  # noqa: E402
-from bake.export import sb3  # noqa: E402
+from bake.scratch import sb3  # noqa: E402
 from bake.scratch import readers  # noqa: E402
 from bake.scratch.project import reader_spec  # noqa: E402
-from bake.textures import images, textimage  # noqa: E402
+from bake.scratch import textimage  # noqa: E402
+from bake.textures import images  # noqa: E402
 
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
 OUT = REPO / "benchmarks" / "results" / "scratch_vm.json"

@@ -27,7 +27,8 @@ from PIL import Image
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from bake.textures import images, textimage  # noqa: E402
+from bake.scratch import textimage  # noqa: E402
+from bake.textures import images  # noqa: E402
 
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
 

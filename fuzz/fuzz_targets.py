@@ -81,7 +81,7 @@ def read_gltf(data: bytes, folder: Path | None = None, strict: bool = True) -> A
 
 
 def read_sb3(data: bytes, folder: Path | None = None, strict: bool = True) -> Any:
-    from bake.export import sb3
+    from bake.scratch import sb3
 
     entries = sb3.read_archive(data)
     assert all(isinstance(k, str) and isinstance(v, bytes) for k, v in entries.items())

@@ -21,7 +21,7 @@ def main(target: str) -> None:
         import bake.importers.obj  # noqa: F401
         import bake.importers.gltf  # noqa: F401
         import bake.importers.gltf_data  # noqa: F401
-        import bake.export.sb3  # noqa: F401
+        import bake.scratch.sb3  # noqa: F401
         import bake.scene  # noqa: F401
     import fuzz_targets
     from bake.errors import BakeError

@@ -105,7 +105,7 @@ def glb(doc: dict, buf: bytes) -> bytes:
 
 
 def sb3_seeds() -> dict[str, bytes]:
-    from bake.export import sb3
+    from bake.scratch import sb3
 
     data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists={"verts": [1, 2, 3]}),
                              sb3.Target("Sprite1", layer_order=1, lists={"own": ["a"]})])

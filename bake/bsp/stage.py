@@ -17,14 +17,13 @@ import numpy as np
 from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
+from ..scratch.numbers import format_numbers, json_array, project_json_bytes
 from .encode import Encoded, encode
 from .merge import SourceFaces, merge_coplanar
 from .split import FaceStore, face_planes
 
 NODES_LIST = "bsp nodes"
 PLANES_LIST = "bsp planes"
-# a list entry in project.json: "<20-char id>":["<name>",[items]],  (as bake/export/lists.py)
-LIST_ENTRY_OVERHEAD = 28
 
 
 def options(cfg: Any) -> BuildOptions:
@@ -196,10 +195,8 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
 
 def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tuple[int, int]:
     """(items, project.json bytes) of a list written as short JSON numbers."""
-    from ..export.numbers import format_numbers, json_array
-
     items = format_numbers(np.asarray(values), decimals, name=name)
-    return len(items), len(json.dumps(name)) + len(json_array(items)) + LIST_ENTRY_OVERHEAD
+    return len(items), project_json_bytes(name, json_array(items))
 
 
 def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:

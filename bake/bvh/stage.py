@@ -16,11 +16,11 @@ from ..config import BVHConfig
 from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import Scene, ScratchList
+from ..scratch.limits import LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
 from . import build as build_mod
 from .encode import MAX_LEAF, decimals_for, encode, round_nearest, sizes
+from .traverse import BARY_HI, BARY_LO
 
-VANILLA_LIST_LIMIT = 200_000
-PROJECT_JSON_LIMIT = 5 * 1024 * 1024
 
 
 def _check(cfg: BVHConfig) -> None:
@@ -97,7 +97,8 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     scene = scene.with_list(ScratchList(
         names["ids"], enc.ids, stride=1, kind="int", decimals=None,
         doc="BVH leaf slots: scene triangle number (1-based)"))
-    scene = scene.with_artefact("bvh", {"tree": bvh, "encoded": enc})
+    # the reader sprite's inside test uses the reference's bounds (bake.scratch.readers.BVHSpec)
+    scene = scene.with_artefact("bvh", {"tree": bvh, "encoded": enc, "bary": (BARY_LO, BARY_HI)})
 
     sah = build_mod.sah_cost(bvh)
     rec.accuracy["sah_cost"] = sah
@@ -113,7 +114,7 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
         "build_info": {k: v for k, v in bvh.info.items() if isinstance(v, (int, float, str))},
     }
     for key, n in (("nodes", len(enc.nodes)), ("tris", len(enc.tris)), ("ids", len(enc.ids))):
-        if n > VANILLA_LIST_LIMIT:
+        if n > LIST_ITEM_LIMIT:
             rec.warn(f"list '{names[key]}' has {n} items: more than vanilla Scratch's 200,000 "
                      "(it loads, but blocks cannot add to it; TurboWarp has no limit)")
     if sz["bytes"] > PROJECT_JSON_LIMIT:

@@ -81,7 +81,7 @@ def _load_json(path: Path) -> Any:
 
 def _sb3_costumes(out_dir: Path, report: dict) -> dict[str, bytes]:
     """Costume name -> image bytes from the .sb3 this bake wrote (if any)."""
-    from .sb3 import read_archive
+    from ..scratch.sb3 import read_archive
 
     sb3s = sorted(k for k, v in report.get("outputs", {}).items() if k.endswith(".sb3") and v != "removed")
     out: dict[str, bytes] = {}
@@ -112,7 +112,7 @@ def decoded_textures(lists: dict[str, list], report: dict, costumes: dict[str, b
     images: {encoding: (H, W, 4) uint8}, agree: bool}]."""
     from PIL import Image
 
-    from ..textures import colors, textimage
+    from ..scratch import colors, textimage
 
     tc = report.get("config", {}).get("textures", {})
     size_re = _pattern(tc.get("size_list_name", "tex {material} size"))

@@ -33,29 +33,13 @@ from ..config import ExportConfig
 from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
-from ..textures.colors import scratch_numbers
-from .numbers import decimals_for, format_numbers, json_array
-
-# A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
-# characters in projects saved by Scratch; the rest is punctuation.
-LIST_ENTRY_OVERHEAD = 20 + 2 + 1 + 2 + 1 + 1 + 1
-
+from ..scratch.colors import scratch_numbers
+from ..scratch.numbers import decimals_for, format_numbers, json_array, project_json_bytes, render_items
 
 def list_file_name(name: str) -> str:
     """A safe file name for a list (Scratch ignores the file name on import)."""
     safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "list"
     return f"lists/{safe}.txt"
-
-
-def render_items(lst: ScratchList) -> list[str]:
-    if lst.kind == "string":
-        return [str(v) for v in lst.values]
-    return format_numbers(np.asarray(lst.values), lst.decimals, name=lst.name)
-
-
-def project_json_bytes(name: str, items_json: str) -> int:
-    """Bytes this list adds to a project.json (hidden monitor, so stored once)."""
-    return len(json.dumps(name, ensure_ascii=False).encode()) + len(items_json.encode()) + LIST_ENTRY_OVERHEAD
 
 
 def _colour_list(rgba: np.ndarray, mode: str):

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..render import Camera, Image, headlight, render
-from ..textures.colors import decode_numbers
+from ..scratch.colors import decode_numbers
 
 #: two pixels differ visibly when a channel differs by more than this (0..255)
 VISIBLE = 2

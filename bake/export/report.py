@@ -23,13 +23,9 @@ from typing import Any
 from .. import __version__
 from ..config import to_dict
 from ..pipeline import BakeResult, counts
+from ..scratch.limits import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_BASE_BYTES, PROJECT_JSON_LIMIT
 
 REPORT_VERSION = 1
-LIST_ITEM_LIMIT = 200_000  # vanilla `add to list` stops here (loading is not limited)
-PROJECT_JSON_LIMIT = 5 * 1024 * 1024  # 5 MiB upload limit on scratch.mit.edu
-ASSET_LIMIT = 10_000_000  # each costume/sound must be under 10 MB
-# An empty project.json (stage, one sprite, backdrop and costume entries, meta) is about this size.
-PROJECT_BASE_BYTES = 1_500
 
 
 def build(result: BakeResult, outputs: dict[str, str] | None = None,

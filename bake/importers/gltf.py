@@ -34,7 +34,7 @@ import numpy as np
 from ..config import ImportJob
 from ..record import StageRecord
 from ..scene import DEFAULT_MATERIAL, MAX_COORDINATE, Light, Material, Scene, SourceInfo
-from ..textures.colors import linear_to_srgb
+from ..colorspace import linear_to_srgb
 from .gltf_data import MESHOPT_EXTENSIONS, GltfDocument, decode_draco, open_document
 
 MODE_NAMES = {0: "points", 1: "lines", 2: "line_loop", 3: "line_strip", 4: "triangles",

@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..textures.colors import linear_to_srgb, srgb_to_linear
+from ..colorspace import linear_to_srgb, srgb_to_linear
 
 AlbedoProvider = Callable[["object"], np.ndarray]  # Scene -> (T, 4) RGBA in [0, 1]
 

@@ -8,6 +8,7 @@ texel sample points.
 
 from __future__ import annotations
 
+import dataclasses as _dc
 import time
 from typing import Callable
 
@@ -16,6 +17,13 @@ import numpy as np
 from ..errors import ConfigError, StageError
 from ..scene import Scene
 from ..textures.lightmap import LightmapJob, Shader, bake, seam_error
+from . import color as colmod
+from .baker import Baker, LightingResult
+from .bounce import BounceRays, field_radiance
+from .plan import make_plan
+from .rays import Tracer
+from .sampling import hash_combine
+from .targets import Points
 
 
 def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
@@ -36,15 +44,6 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
     the per-triangle bake multiplied into every texel; :func:`bake_lightmap` passes the unlit
     albedo, see :func:`scene_albedo`).
     """
-    import dataclasses as _dc
-
-    from . import color as colmod
-    from .bounce import BounceRays, field_radiance
-    from .plan import make_plan
-    from .sampling import hash_combine
-    from .stage import Baker
-    from .targets import Points
-
     full = _dc.replace(lighting_cfg, target="triangle", subdivide=False)
     provider = _provider(albedo)
     k = max(1, int(samples_per_texel))
@@ -99,7 +98,7 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
 
 
 def _provider(albedo):
-    """An albedo override for :class:`bake.lighting.stage.Baker`: ``None``, a provider, or a
+    """An albedo override for :class:`bake.lighting.baker.Baker`: ``None``, a provider, or a
     fixed (T, 4) array (wrapped; checked against the scene's triangle count when used)."""
     if albedo is None or callable(albedo):
         return albedo
@@ -111,8 +110,6 @@ def scene_albedo(scene: Scene):
     """The unlit albedo for shading ``scene``'s texels: the one the lighting stage used when
     ``scene`` is its output (``LightingResult.albedo``, same triangles), else ``None`` (the
     scene's own base colour)."""
-    from .stage import LightingResult
-
     res = scene.artefacts.get("lighting")
     if isinstance(res, LightingResult) and res.albedo is not None and len(res.albedo) == scene.n_triangles:
         return res.albedo
@@ -145,7 +142,10 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
         albedo = scene_albedo(scene)
     shade, ray_stats = light_function(scene, lighting_cfg, output=output,
                                       samples_per_texel=job.config.supersample ** 2, albedo=albedo)
-    res = bake(scene, job.atlas, shade, job.config)
+    # samples that start inside or behind geometry are pushed out with rays (the same tracer the
+    # textures module would build; the lighting package owns Embree)
+    tracer = Tracer(scene.positions, scene.triangles, threads=0, scale=scene.scale()) if job.config.push_out else None
+    res = bake(scene, job.atlas, shade, job.config, tracer=tracer)
     rgb = np.clip(res.image[:, :, :3], 0.0, 1.0)
     img8 = np.concatenate([np.rint(rgb * 255.0).astype(np.uint8),
                            np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)

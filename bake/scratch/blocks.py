@@ -39,7 +39,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Sequence, Union
 
-from ..export.sb3 import stable_id
+from .sb3 import stable_id
 
 # shadow kinds (compressed primitive codes)
 NUM, POS, WHOLE, INT, ANGLE, COLOUR, TEXT = 4, 5, 6, 7, 8, 9, 10
@@ -365,7 +365,7 @@ class Scope:
     """The names a target's scripts may use: its own variables/lists and the stage's.
 
     ``variables``/``lists`` map a name to its id (or give names only: ids are derived the way
-    :class:`bake.export.sb3.Target` derives them)."""
+    :class:`bake.scratch.sb3.Target` derives them)."""
 
     target: str
     variables: dict[str, str] | Iterable[str] = field(default_factory=dict)

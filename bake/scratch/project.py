@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from ..export import sb3
+from . import sb3
 from . import readers
 
 
@@ -64,7 +64,7 @@ def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
         names = {"nodes": nodes, "tris": f"{prefix} tris", "ids": f"{prefix} tri ids"}
     if not all(n in values for n in names.values()):
         return None
-    return readers.BVHSpec(layout=enc.layout, bits=int(enc.bits or 0), nodes=names["nodes"],
+    return readers.BVHSpec(bary=tuple(art["bary"]), layout=enc.layout, bits=int(enc.bits or 0), nodes=names["nodes"],
                            tris=names["tris"], ids=names["ids"])
 
 

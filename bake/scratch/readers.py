@@ -66,9 +66,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..bvh.traverse import BARY_HI, BARY_LO
-from ..export import sb3
-from ..textures.textimage import ALPHABET, VOLUMES
+from . import sb3
+from .textimage import ALPHABET, VOLUMES
 from . import blocks as B
 from .blocks import add, div, eq, floor, gt, item, lt, mod, mul, not_, or_, and_, sub, var
 
@@ -89,6 +88,11 @@ class MeshNames:
 
 @dataclass
 class BVHSpec:
+    """The BVH lists (docs/formats-bvh.md). ``bary`` is the inside test's (low, high) bound on the
+    barycentrics, the one the Python reference uses (``bake.bvh.traverse.BARY_LO/HI``; the BVH
+    stage puts it in its artefact), so the blocks find exactly the reference's hits."""
+
+    bary: tuple[float, float]
     layout: str = "quantised"  # binary | wide4 | quantised
     bits: int = 6
     nodes: str = "bvh nodes"
@@ -473,6 +477,7 @@ def _load_color(r: _Reader, t: B.Node) -> B.Node:
 def _bvh_blocks(r: _Reader) -> None:
     s = r.spec.bvh
     assert s is not None
+    BARY_LO, BARY_HI = s.bary
     nodes, tris, ids = r.lst(s.nodes), r.lst(s.tris), r.lst(s.ids)
     o = [r.v(f"_o{a}") for a in "xyz"]
     d = [r.v(f"_d{a}") for a in "xyz"]
@@ -897,7 +902,7 @@ def _textimage_blocks(r: _Reader) -> None:
 def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[str, list] | None = None,
                   stage_lists: dict[str, str] | Sequence[str] = (), layer_order: int = 1,
                   demo: bool = False) -> sb3.Target:
-    """The reader sprite as a :class:`bake.export.sb3.Target`.
+    """The reader sprite as a :class:`bake.scratch.sb3.Target`.
 
     ``local_lists``: data lists stored in the sprite itself (name -> items), e.g. for a
     .sprite3. ``stage_lists``: names (or name -> id) of data lists that live on the stage.

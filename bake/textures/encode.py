@@ -28,12 +28,10 @@ from typing import Literal
 import numpy as np
 from PIL import Image
 
-from ..export import sb3
-from ..export.lists import project_json_bytes, render_items
-from ..export.numbers import json_array
-from ..export.report import ASSET_LIMIT
 from ..scene import ScratchList
-from . import colors, textimage
+from ..scratch import colors, sb3, textimage
+from ..scratch.limits import ASSET_LIMIT
+from ..scratch.numbers import json_array, project_json_bytes, render_items
 
 ENCODINGS = ("list", "textimage", "costume")
 BITMAP_RESOLUTION = 2

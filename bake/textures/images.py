@@ -25,8 +25,8 @@ from typing import Literal, Union
 import numpy as np
 from PIL import Image
 
-from bake.errors import InputError
-from bake.textures.colors import linear_to_srgb, srgb_to_linear, to_bytes
+from ..errors import InputError
+from ..colorspace import linear_to_srgb, srgb_to_linear, to_bytes
 
 Source = Union[str, Path, bytes, bytearray, memoryview, Image.Image, np.ndarray]
 Filter = Literal["nearest", "box", "bilinear", "hamming", "bicubic", "lanczos"]

@@ -450,8 +450,8 @@ def texel_samples(scene: Scene, atlas: Atlas, *, supersample: int = 2, push: boo
                   tracer=None) -> TexelSamples:
     """The sample points of every covered texel (see the module docstring).
 
-    ``push=True`` runs :func:`push_out` (it needs a ray tracer: ``tracer`` or one built with the
-    lighting stage's Embree :class:`bake.lighting.rays.Tracer`).
+    ``push=True`` runs :func:`push_out` with ``tracer`` (the lighting stage's Embree
+    :class:`bake.lighting.rays.Tracer`, which the caller builds: this module does not trace rays).
     """
     s = int(supersample)
     if s < 1:
@@ -508,15 +508,9 @@ def texel_samples(scene: Scene, atlas: Atlas, *, supersample: int = 2, push: boo
                        pushed=np.zeros(len(points), bool), texel_size=texel_world_size(scene, atlas))
     if push and len(out):
         if tracer is None:
-            tracer = make_tracer(scene)
+            raise ValueError("push=True needs a ray tracer (bake.lighting.rays.Tracer)")
         out.points, out.pushed = push_out(out.points, out.normals, out.texel_size[out.tri_ids], tracer)
     return out
-
-
-def make_tracer(scene: Scene, threads: int = 0):
-    from ..lighting.rays import Tracer  # Embree; the lighting stage's float64-safe wrapper
-
-    return Tracer(scene.positions, scene.triangles, threads=threads, scale=scene.scale())
 
 
 def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -10,7 +10,7 @@ from bake.bvh.encode import json_lengths, qdecode, widen
 from bake.bvh.stage import stage
 from bake.config import BVHConfig
 from bake.errors import ConfigError
-from bake.export.numbers import format_numbers
+from bake.scratch.numbers import format_numbers
 from bake.scene import Scene, make_scene
 from bvh_meshes import load_corpus, soup
 

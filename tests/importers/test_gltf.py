@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bake.config import ImportJob
-from bake.textures.colors import linear_to_srgb
+from bake.colorspace import linear_to_srgb
 from bake.errors import InputError
 from bake.importers.gltf import load
 

@@ -32,7 +32,7 @@ from bake.lighting import stage as lighting_stage
 from bake.lighting.lightmap import bake_lightmap
 from bake.scene import Material, make_scene
 from bake.textures import stage as tstage
-from bake.textures.colors import srgb_to_linear
+from bake.colorspace import srgb_to_linear
 from bake.textures.lightmap import bilinear
 from lighting_geom import grid
 

@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bake.export import sb3 as sb3_mod
+from bake.scratch import sb3 as sb3_mod
 from rel_util import gltf_triangles, run_cli, write_gltf, write_obj
 
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from bake.export import sb3
+from bake.scratch import sb3
 from bake.scratch import blocks as B
 from vm_harness import call, vm  # noqa: F401  (vm is a fixture)
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from bake.bsp.traverse import draw_order
-from bake.export import sb3
+from bake.scratch import sb3
 from bake.scratch import readers
 from bake.scratch.project import reader_spec
-from bake.textures.colors import decode_numbers
+from bake.scratch.colors import decode_numbers
 from conftest import corpus_path
 from scratch_models import bake, cameras, check_render, project_lists, soup_obj
 from vm_harness import call, vm  # noqa: F401

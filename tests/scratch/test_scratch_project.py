@@ -17,7 +17,7 @@ import pytest
 
 from bake import cli
 from bake.bsp.traverse import draw_order
-from bake.export import sb3
+from bake.scratch import sb3
 from bake.scratch import blocks as B
 from conftest import corpus_path
 from vm_harness import call, vm  # noqa: F401

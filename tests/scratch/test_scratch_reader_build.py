@@ -6,11 +6,12 @@ import json
 
 import pytest
 
-from bake.export import sb3
+from bake.bvh.traverse import BARY_HI, BARY_LO
+from bake.scratch import sb3
 from bake.scratch import blocks as B
 from bake.scratch import readers
 from bake.scratch.project import auto_camera, look_at
-from bake.textures.textimage import ALPHABET
+from bake.scratch.textimage import ALPHABET
 
 DATA = {"verts": [0, 0, 0, 1, 0, 0, 0, 1, 0], "tris": [1, 2, 3, 1], "mat colors": [255],
         "bvh nodes": [0], "bvh tris": [0] * 9, "bvh tri ids": [1]}
@@ -23,7 +24,7 @@ def _procs(target):
 
 @pytest.mark.parametrize("layout", ["binary", "wide4", "quantised"])
 def test_reader_is_complete_valid_and_deterministic(layout):
-    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), bvh=readers.BVHSpec(layout=layout, bits=4))
+    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI), layout=layout, bits=4))
     a = readers.reader_target(spec, "Reader", stage_lists=list(DATA), demo=True)
     b = readers.reader_target(spec, "Reader", stage_lists=list(DATA), demo=True)
     assert json.dumps(a.to_json()) == json.dumps(b.to_json())

@@ -19,11 +19,11 @@ import json
 import numpy as np
 import pytest
 
-from bake.bvh.traverse import trace_one
-from bake.export import sb3
+from bake.bvh.traverse import BARY_HI, BARY_LO, trace_one
+from bake.scratch import sb3
 from bake.scratch import readers
 from bake.scratch.project import reader_spec
-from bake.textures.colors import decode_numbers
+from bake.scratch.colors import decode_numbers
 from conftest import corpus_path
 from scratch_models import bake, cameras, check_render, encoded_from_lists, project_lists, rays, soup_obj
 from vm_harness import call, vm  # noqa: F401
@@ -154,7 +154,7 @@ def test_bvh_triangle_test_tolerance_in_the_vm(vm, tmp_path):  # noqa: F811
         out, _ = bvh_stage.stage(sc, BVHConfig(enabled=True, layout=layout))
         enc = out.artefacts["bvh"]["encoded"]
         lists = {"bvh nodes": enc.nodes.tolist(), "bvh tris": enc.tris.tolist(), "bvh tri ids": enc.ids.tolist()}
-        spec = readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(layout=layout, bits=enc.bits), textimage=False)
+        spec = readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI), layout=layout, bits=enc.bits), textimage=False)
         sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
         data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
         path = tmp_path / f"tol-{layout}.sb3"

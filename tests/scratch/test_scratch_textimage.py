@@ -1,5 +1,5 @@
 """The reader's ``decode textimage`` in the real Scratch VM gives exactly the pixels of our Python
-decoder (``bake.textures.textimage.decode``), as colour numbers bottom row first, for images that
+decoder (``bake.scratch.textimage.decode``), as colour numbers bottom row first, for images that
 exercise every operation: raw, the four copies, the hash table, small and large difference
 volumes, RLE, A8 alpha (raw, increments, decrements), an A8 grey main layer, layers in an unusual
 order, custom header attributes, 1-pixel-wide images (the reference's vertical-forward quirk) and a
@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bake.export import sb3
+from bake.scratch import sb3
 from bake.scratch import readers
-from bake.textures import colors, images, textimage
+from bake.scratch import colors, textimage
+from bake.textures import images
 from conftest import corpus_path
 from vm_harness import call, vm  # noqa: F401
 

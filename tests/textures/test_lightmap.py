@@ -32,9 +32,16 @@ from bake.config import LightConfig, LightingConfig, LightmapConfig
 from bake.errors import StageError
 from bake.scene import make_scene
 from bake.lighting.lightmap import light_function
+from bake.lighting.rays import Tracer
 from bake.textures import lightmap as lm
 from conftest import corpus_path
 from meshgen import merge
+
+
+def tracer_for(scene):
+    """The Embree tracer the lighting stage passes for push-out."""
+    return Tracer(scene.positions, scene.triangles, threads=0, scale=scene.scale())
+
 
 SUN = np.array([-0.5, -1.0, 0.0])
 COS_SUN = 1.0 / np.sqrt(1.25)  # n . l for the ground and SUN
@@ -397,7 +404,7 @@ def test_corpus_lightmap_machinery(name, file, tmp_path):
     lcfg = _cfg(tmp_path)
     atlas = lm.unwrap(scene, lcfg)
     f, grad, size = _smooth_light(scene)
-    res = lm.bake(scene, atlas, f, lcfg)
+    res = lm.bake(scene, atlas, f, lcfg, tracer=tracer_for(scene))
     figs = res.figures
     _, area = lm.face_normals(scene.positions, scene.triangles)
     # only degenerate triangles are left out by xatlas; every other one has texels
@@ -418,7 +425,7 @@ def test_corpus_lightmap_machinery(name, file, tmp_path):
         assert figs["seam_error"] < figs["seam_error_before"]
     assert figs["samples_pushed"] > 0  # blocks standing on floors / walls on the ground
     # deterministic: the same bake again gives the same image bit for bit
-    again = lm.bake(scene, lm.unwrap(scene, lcfg), f, lcfg)
+    again = lm.bake(scene, lm.unwrap(scene, lcfg), f, lcfg, tracer=tracer_for(scene))
     assert np.array_equal(again.image, res.image)
 
 
@@ -441,8 +448,8 @@ def test_stitching_fixes_seams_on_a_smooth_surface(tmp_path):
     def f(p, nrm, tri):  # smooth in space: any jump at the cut is the lightmap's doing
         return (0.5 + 0.4 * np.sin(2.0 * p[:, 0] + 1.0) * np.cos(1.5 * p[:, 1]) + 0.1 * p[:, 2])[:, None]
 
-    raw = lm.bake(scene, atlas, f, dataclasses.replace(cfg, stitch_seams=False))
-    fixed = lm.bake(scene, atlas, f, cfg)
+    raw = lm.bake(scene, atlas, f, dataclasses.replace(cfg, stitch_seams=False), tracer=tracer_for(scene))
+    fixed = lm.bake(scene, atlas, f, cfg, tracer=tracer_for(scene))
     assert raw.figures["seam_error"] > 2 / 255  # visible without stitching
     assert fixed.figures["seam_error"] <= 0.25 * raw.figures["seam_error"]
     assert fixed.figures["seam_error"] <= 2 / 255
@@ -461,7 +468,7 @@ def test_push_out_leaves_closed_boxes(tmp_path):
     scene = make_scene(v, t)
     atlas = lm.unwrap(scene, _cfg(tmp_path, resolution=128))
     plain = lm.texel_samples(scene, atlas, supersample=2)
-    pushed = lm.texel_samples(scene, atlas, supersample=2, push=True)
+    pushed = lm.texel_samples(scene, atlas, supersample=2, push=True, tracer=tracer_for(scene))
 
     def inside(p):
         a = np.all((p > [-0.5, 0.0, -0.5]) & (p < [0.5, 0.6, 0.5]), axis=1)
@@ -512,7 +519,7 @@ def _sun_bake(scene, atlas, cfg):
                            color_space="linear", vertex_output="light")
     light.shadows.samples = 1
     shade, _ = light_function(scene, light, output="light", samples_per_texel=cfg.supersample ** 2)
-    return lm.bake(scene, atlas, shade, cfg).image[:, :, 0]
+    return lm.bake(scene, atlas, shade, cfg, tracer=tracer_for(scene)).image[:, :, 0]
 
 
 def test_no_shadow_fringe_at_thick_walls_with_real_lighting(tmp_path):

@@ -27,15 +27,16 @@ from bake import pipeline
 from bake.config import ExportConfig, LightConfig, LightingConfig, TexturesConfig
 from bake.errors import StageError
 from bake.export import lists as export_lists
-from bake.export import sb3
-from bake.export.report import ASSET_LIMIT
+from bake.scratch import sb3
+from bake.scratch.limits import ASSET_LIMIT
 from bake.lighting import color as lighting_color
 from bake.lighting import stage as lighting_stage
 from bake.scene import Material, make_scene
-from bake.textures import colors, lightmap, textimage
+from bake.scratch import colors, textimage
+from bake.textures import lightmap
 from bake.export.lists import stage as export_stage
 from bake.textures import stage as tstage
-from bake.textures.colors import linear_to_srgb, srgb_to_linear
+from bake.colorspace import linear_to_srgb, srgb_to_linear
 from conftest import corpus_path
 
 
@@ -449,7 +450,8 @@ def test_texture_costumes_reach_the_projects_and_assets(tmp_path):
     """The PNG costume of a texture is a file under assets/, a costume of a hidden "Textures"
     sprite in the .sb3 and of the .sprite3, byte-identical, and counted against the asset limit."""
     from bake import pipeline
-    from bake.export import output, sb3
+    from bake.export import output
+    from bake.scratch import sb3
 
     cfg = pipeline.load_config_for(corpus_path("duck_glb", "Duck.glb"), ["textures.enabled=true"])
     rep = output.finish(pipeline.run(cfg), tmp_path)

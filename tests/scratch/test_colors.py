@@ -1,4 +1,4 @@
-"""Texture colours: Scratch colour numbers and image <-> colour lists (bake.textures.colors), and
+"""Texture colours: Scratch colour numbers and image <-> colour lists (bake.scratch.colors), and
 texture loading, resampling and per-triangle averages (bake.textures.images).
 
 The triangle average is checked against an exact brute force written here: every texel the
@@ -19,8 +19,9 @@ from hypothesis import given, settings, strategies as st
 from PIL import Image
 
 from bake.errors import InputError
-from bake.textures import colors, images
-from bake.textures.colors import (decode_numbers, image_to_list, js_to_number, list_to_image,
+from bake.scratch import colors
+from bake.textures import images
+from bake.scratch.colors import (decode_numbers, image_to_list, js_to_number, list_to_image,
                                   numbers_from_bytes, scratch_color, scratch_numbers)
 
 # ---------------------------------------------------------------------------------------------

@@ -36,7 +36,7 @@ from typing import Literal, Mapping
 
 import numpy as np
 
-from bake.errors import InputError
+from ..errors import InputError
 
 ALPHABET = "".join(chr(c) for c in range(33, 127))  # '!' .. '~', value = ord(c) - 33
 BASE = 94
@@ -339,7 +339,7 @@ def _as_uint8_image(image: np.ndarray) -> np.ndarray:
     if a.dtype != np.uint8:
         if not np.issubdtype(a.dtype, np.integer):
             raise TextImageError(f"TextImage encoder needs uint8 pixels, got {a.dtype} "
-                                 "(convert floats in [0, 1] with bake.textures.colors.to_bytes)")
+                                 "(convert floats in [0, 1] with bake.colorspace.to_bytes)")
         if a.size and (a.min() < 0 or a.max() > 255):
             raise TextImageError("TextImage encoder needs pixel values in 0..255")
         a = a.astype(np.uint8)

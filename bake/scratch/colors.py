@@ -25,29 +25,12 @@ from typing import Iterable, Literal
 
 import numpy as np
 
+from ..colorspace import to_bytes
+
 ColorMode = Literal["rgb", "argb", "hex"]
 FirstRow = Literal["top", "bottom"]
 MODES = ("rgb", "argb", "hex")
 FIRST_ROWS = ("top", "bottom")
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0, 1] (what Scratch shows, OBJ Kd, image texels) to linear light."""
-    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    """Linear light in [0, 1] (glTF factors and COLOR_0, lighting sums) to sRGB-encoded values."""
-    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    out = np.where(c <= 0.0031308, c * 12.92, 1.055 * np.power(c, 1 / 2.4) - 0.055)
-    return np.where(c >= 1.0, 1.0, out)  # exact white (1.055 - 0.055 rounds below 1)
-
-
-def to_bytes(rgba: np.ndarray) -> np.ndarray:
-    """Float colours in [0, 1] -> uint8, rounded to nearest, NaN treated as 0."""
-    a = np.nan_to_num(np.asarray(rgba, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
-    return np.clip(np.rint(a * 255.0), 0, 255).astype(np.uint8)
 
 
 def numbers_from_bytes(rgba: np.ndarray, mode: ColorMode = "rgb") -> np.ndarray | list[str]:
@@ -103,7 +86,7 @@ def image_to_list(image: np.ndarray, mode: ColorMode = "rgb",
     _check_first_row(first_row)
     a = np.asarray(image)
     if a.dtype != np.uint8:
-        raise ValueError(f"expected a uint8 image, got {a.dtype} (floats: use colors.to_bytes)")
+        raise ValueError(f"expected a uint8 image, got {a.dtype} (floats: use bake.colorspace.to_bytes)")
     if a.ndim != 3 or a.shape[2] not in (3, 4):
         raise ValueError(f"expected an (H, W, 3) or (H, W, 4) image, got shape {a.shape}")
     if first_row == "bottom":

@@ -9,11 +9,17 @@ NaN and Infinity are refused: Scratch's parser rejects ``null`` items, which is 
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 
 from ..errors import StageError
+from ..scene import ScratchList
+
+# A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
+# characters in projects saved by Scratch; the rest is punctuation.
+LIST_ENTRY_OVERHEAD = 20 + 2 + 1 + 2 + 1 + 1 + 1
 
 
 def decimals_for(step: float) -> int:
@@ -57,6 +63,17 @@ def format_numbers(values: np.ndarray | list, decimals: int | None = None, *, na
 def json_array(items: list[str], kind: str = "number") -> str:
     """A JSON array from preformatted items (numbers unquoted, strings quoted)."""
     if kind == "string":
-        import json
         return json.dumps(items, ensure_ascii=False, separators=(",", ":"))
     return "[" + ",".join(items) + "]"
+
+
+def render_items(lst: ScratchList) -> list[str]:
+    """A list's items as the text written into project.json and the list files."""
+    if lst.kind == "string":
+        return [str(v) for v in lst.values]
+    return format_numbers(np.asarray(lst.values), lst.decimals, name=lst.name)
+
+
+def project_json_bytes(name: str, items_json: str) -> int:
+    """Bytes this list adds to a project.json (hidden monitor, so stored once)."""
+    return len(json.dumps(name, ensure_ascii=False).encode()) + len(items_json.encode()) + LIST_ENTRY_OVERHEAD

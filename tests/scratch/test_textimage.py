@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bake.textures import textimage as ti
-from bake.textures.textimage import TextImageError, decode, encode
+from bake.scratch import textimage as ti
+from bake.scratch.textimage import TextImageError, decode, encode
 
 # ---------------------------------------------------------------------------------------------
 # Reference codec, written from the spec only (deliberately simple: one loop step per pixel).

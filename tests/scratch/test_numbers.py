@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from bake.errors import StageError
-from bake.export.numbers import decimals_for, format_numbers
+from bake.scratch.numbers import decimals_for, format_numbers
 
 
 def test_shortest_forms():

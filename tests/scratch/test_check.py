@@ -3,8 +3,8 @@
 import json
 
 from bake import cli
-from bake.export import sb3
-from bake.export.check import check
+from bake.scratch import sb3
+from bake.scratch.check import check
 
 
 def write(tmp_path, lists, name="p.sb3"):

@@ -3,7 +3,7 @@
 For authors who hit the 5 MiB project.json wall: every list and variable (items and the bytes it
 takes in project.json, including a visible monitor's second copy), each target's blocks, and every
 asset (costumes, sounds) against 10 MB. The project is read as untrusted input
-(:func:`bake.export.sb3.load_project`); nothing is written.
+(:func:`bake.scratch.sb3.load_project`); nothing is written.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from . import sb3
-from .report import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
+from .limits import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
 
 
 def _size(obj: Any) -> int:

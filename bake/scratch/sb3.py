@@ -34,6 +34,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from ..errors import InputError
+from .limits import ASSET_LIMIT, PROJECT_JSON_LIMIT
 
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 ID_ALPHABET = "!#%()*+,-./:;=?@[]^_`{|}~ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789"
@@ -44,8 +45,6 @@ BACKDROP_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" width="480" height="36
 SPRITE_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" width="2" height="2" viewBox="0 0 2 2">'
               b'<rect width="2" height="2" fill="#000000" fill-opacity="0"/></svg>')
 
-ASSET_LIMIT = 10_000_000  # each asset must be under 10 MB to save on scratch.mit.edu
-PROJECT_JSON_LIMIT = 5 * 1024 * 1024  # project.json upload limit
 
 # Limits for reading untrusted archives.
 MAX_ENTRIES = 10_000

@@ -8,7 +8,7 @@ import zipfile
 import pytest
 
 from bake.errors import InputError
-from bake.export import sb3
+from bake.scratch import sb3
 
 
 def lists():

@@ -1,0 +1,121 @@
+"""The package layout (shared/docs/layout.md): no import circles, and Scratch-format knowledge in
+one room (``bake/scratch/``) that the stages hand data to, never the other way round.
+
+Every ``import`` counts, including those inside functions (a lazy import is still a circle)."""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1] / "bake"
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in ROOT.rglob("*.py"):
+        parts = p.relative_to(ROOT.parent).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        out[name] = p
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the bake modules it imports (anywhere in the file)."""
+    mods = _modules()
+    graph: dict[str, set[str]] = defaultdict(set)
+    for name, path in mods.items():
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = name.split(".") if is_pkg else name.split(".")[:-1]
+                    base = base[:len(base) - (node.level - 1)]
+                    mod = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in mods else mod for a in node.names]
+            for t in targets:
+                if t in mods and t != name:
+                    graph[name].add(t)
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _package(mod: str) -> str:
+    return ".".join(mod.split(".")[:2])
+
+
+def test_the_graph_sees_lazy_imports():
+    g = import_graph()
+    # bake.lighting.lightmap imports the textures' lightmap machinery, and bake.cli imports
+    # bake.scratch.check inside a function: both must be edges
+    assert "bake.textures.lightmap" in g["bake.lighting.lightmap"]
+    assert "bake.scratch.check" in g["bake.cli"]
+    assert _cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [["a", "b"]]
+
+
+def test_no_module_import_circles():
+    assert _cycles(import_graph()) == []
+
+
+def test_no_package_import_circles():
+    pg: dict[str, set[str]] = defaultdict(set)
+    for a, bs in import_graph().items():
+        for b in bs:
+            if _package(a) != _package(b) and _package(b) != "bake":
+                pg[_package(a)].add(_package(b))
+    assert _cycles(pg) == []
+
+
+def test_scratch_room_depends_on_no_stage():
+    """bake/scratch/ owns number text, colour numbers, TextImage, .sb3, blocks, readers and
+    packers; the stages call it. It may read the data model and the BVH format's constants."""
+    allowed = {"bake.scratch", "bake.errors", "bake.scene", "bake.colorspace", "bake.bvh", "bake"}
+    bad = {(a, b) for a, bs in import_graph().items() if a.startswith("bake.scratch")
+           for b in bs if _package(b) not in allowed}
+    assert bad == set()
+
+
+def test_moved_modules_are_gone():
+    for old in ("export/sb3.py", "export/numbers.py", "export/check.py", "textures/colors.py",
+                "textures/textimage.py"):
+        assert not (ROOT / old).exists(), old

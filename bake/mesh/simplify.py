@@ -6,12 +6,14 @@ stage searches the smallest triangle count whose measured error stays within ``e
 
 Methods (quadric edge collapse, all through compiled libraries):
 
-* ``meshopt`` (default): meshoptimizer (bake/mesh/simplify_meshopt.py). It never moves
-  vertices, so what is kept has the input's exact positions, vertex colours and UVs. The mesh is
-  handed over as *wedges* (one vertex per position + region + UV): meshoptimizer treats vertices
-  that share a position as a seam, so a material edge or a UV seam collapses only along itself,
+* ``meshopt`` (default): meshoptimizer (bake/mesh/simplify_meshopt.py). It keeps a subset of
+  the input's vertices, so colours and UVs are the input's exact values. The mesh is handed
+  over as *wedges* (one vertex per position + region + UV): meshoptimizer treats vertices that
+  share a position as a seam, so a material edge or a UV seam collapses only along itself,
   never across, and every output corner keeps its wedge's UV and region. Open borders also
-  collapse only along themselves.
+  collapse only along themselves. Every border and seam chain of the input is first simplified
+  on its own (Douglas-Peucker, at half the library's own error estimate for the target) and
+  the vertices that keeps are locked, so no border chord strays far from the input's border.
 * ``fast``: fast-simplification. It knows only points and triangles; the mesh is split along
   material edges so those become open borders, which ``preserve_border`` keeps vertex for
   vertex. The collapse list is replayed to get the vertex map; each output triangle is one
@@ -22,40 +24,55 @@ Methods (quadric edge collapse, all through compiled libraries):
   quality, giving the same correspondence as for ``fast``. Material edges are held by leaving
   the triangles that touch them out of the selection MeshLab may simplify.
 
-After the library:
+After the library (bake/mesh/simplify_repair.py for the local repairs):
 
-1. flipped triangles (normal turned by more than 90 degrees from the input surface they stand
-   for, sampled on the triangle itself; zero-area triangles have no reliable normal and are not
-   judged; see ``simplify_error.flip_check``) are repaired where possible: turning the edge
-   shared with a neighbour, then moving one free corner back onto the input surface; a repair
-   that makes the error over the triangles it touched (and their ring) worse by more than 10%
-   is undone. Triangles still flipped (or on a new non-manifold edge) get the input vertices
-   under them locked and the library runs again (three rounds). A flip verdict depends only on a
-   triangle's corners, so each check measures only triangles not judged before in the stage.
+1. edges whose two triangles meet at a sharp angle (fins, folds) are turned where that lowers
+   the error around them; flipped triangles (normal turned by more than 90 degrees from the
+   input surface they stand for; ``simplify_error.flip_check``) are repaired where possible
+   (turning an edge, moving a free corner back onto the input surface; undone if it costs more
+   than 10% of the local error), and triangles still flipped get the input vertices under them
+   locked and the library runs again (three rounds).
 2. ``fit_iterations`` rounds of least-squares refit of the free vertex positions to the input
-   surface (bake/mesh/simplify_fit.py); kept only if the measured error drops.
-3. the error is measured (``measure_error``; the measure step 2 took is reused);
-   ``refine_rounds`` times the input vertices under the (up to two, separate) places where it
-   peaks are locked and the whole thing runs again, keeping the better result.
-4. with a triangle target, a result that still has flipped triangles, new non-manifold edges or
+   surface (bake/mesh/simplify_fit.py); kept only if the measured error does not grow.
+3. ``refine_rounds`` rounds of repair where the error peaks: the triangles holding the largest
+   distances (within 80% of the maximum, both directions) get their edges turned where that
+   lowers the local error, and their free corners moved to lower the local *maximum*
+   (a Chebyshev fit; ``simplify_repair.polish``); every move is kept only if the local maximum
+   drops and no triangle turns against the input.
+4. the error is measured (bake/mesh/simplify_measure.py): a dense deterministic grid on both
+   surfaces (every vertex, points along every edge, points inside every triangle), refined
+   around the largest distances, the largest made exact at their points. The record gives the
+   sample size; the maximum is a sampled one (the true maximum can only be larger, by at most
+   how much the distance grows between samples) and is never called exact.
+5. with a triangle target, a result that still has flipped triangles, new non-manifold edges or
    an error above ``error_ceiling`` is not accepted: the stage backs off to the smallest larger
    count that is acceptable and says so in the record (no holes on flat CAD-like geometry).
+
+What stays where it was: vertices on the input's open borders (``preserve_border``) and on
+material or face-colour edges (``preserve_materials``) are never moved by the refit or the
+repairs; with ``meshopt`` they are input border/edge vertices, so every border and material edge
+of the output runs through input border/edge vertices, along chords of the input's border. The
+record reports how far those chords stray from the input's borders
+(``border_chord_max``, fraction of the diagonal) and how many border/edge vertices moved (0).
+Vertices on UV seams may move (both sides of the seam together, so no crack opens).
 
 Whatever the method, material edges (and face-colour edges) are kept when
 ``preserve_materials``; every output triangle has a valid material, UVs and face colour; vertex
 colours are input values; ``tri_polygon`` is -1 everywhere and the polygon arrays are dropped
 (they describe the input vertex numbering, which simplification replaces).
 
-The record: triangles in/out and the target, seconds per phase (library, fit, checks), the
-symmetric Hausdorff max/mean as fractions of the diagonal (``accuracy``), flipped triangles,
-new non-manifold and mis-oriented edges, material-edge checks, how each attribute was carried,
-and a warning for anything that kept the target from being reached.
+The record: triangles in/out and the target, seconds per phase (library, fit, repairs, checks,
+measure), the symmetric Hausdorff max/mean as fractions of the diagonal (``accuracy``) with the
+sample it was measured on, flipped triangles, folds (neighbouring triangles whose normals have
+a dot product below -0.9) in the input and the output, new non-manifold and mis-oriented
+edges, material-edge and border checks, how each attribute was carried, and a warning for
+anything that kept the target from being reached.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -64,9 +81,11 @@ from ..errors import ConfigError, StageError
 from ..record import StageRecord
 from ..scene import Scene
 from . import simplify_meshopt
-from .simplify_error import (FlipResult, HausdorffResult, SurfaceIndex, bounding_spheres, edge_counts, flip_check,
-                             hausdorff, sample_surface, topology, triangle_pattern)
+from . import simplify_repair as repair
+from .simplify_error import (FlipResult, SurfaceIndex, bounding_spheres, edge_counts, flip_check, topology,
+                             triangle_pattern)
 from .simplify_fit import refit
+from .simplify_measure import HausdorffResult, hausdorff, surface_grid
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
@@ -75,10 +94,12 @@ METHODS = ("meshopt", "fast", "quality")
 _REPAIR_ROUNDS = 3
 # Points of the flip check over the input's area (at least 3 per output triangle).
 _FLIP_SAMPLES = 8000
-# Each refine round keeps the input under this many separate places where the error peaks.
-_REFINE_PEAKS = 2
-# The fit pairs every input vertex (up to this many) and error_samples points with the output.
-_FIT_MAX_VERTICES = 200_000
+# Border and seam chains are simplified at this fraction of the library's own error estimate.
+_BORDER_TOLERANCE = 0.5
+# A refine round works on the triangles whose error is within this fraction of the maximum ...
+_PEAK_SHARE = 0.8
+# ... at most this many separate places
+_PEAKS = 24
 # Face colours with more distinct values than this are a colour signal, not flat regions.
 MAX_COLOR_REGIONS = 1024
 
@@ -165,6 +186,7 @@ class _Raw:
     fixed: np.ndarray  # (n,) vertices the fit must not move
     lib_seconds: float
     notes: list[str]
+    lib_error: float = 0.0  # the library's own error estimate (meshoptimizer; absolute units)
 
 
 def _wedges(prep: _Prepared) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -199,8 +221,8 @@ def _run_meshopt(prep: _Prepared, target: int, cfg: SimplifyConfig, lock: np.nda
     Vw = prep.V[w_vertex]
     t = time.perf_counter()
     # with an error ceiling, meshoptimizer stops before its own error estimate passes it
-    Fo, _ = simplify_meshopt.simplify(Vw, Fw, target, lock=lock[w_vertex] if lock.any() else None,
-                                      target_error=cap if cap > 0 else 1e30, absolute_error=cap > 0)
+    Fo, err = simplify_meshopt.simplify(Vw, Fw, target, lock=lock[w_vertex] if lock.any() else None,
+                                        target_error=cap if cap > 0 else 1e30, absolute_error=True)
     lib = time.perf_counter() - t
     notes = []
     reg = w_region[Fo]
@@ -209,7 +231,7 @@ def _run_meshopt(prep: _Prepared, target: int, cfg: SimplifyConfig, lock: np.nda
         notes.append(f"{mixed} triangle(s) had corners from different regions; the first corner's region was used")
     return _Raw(V=prep.V, F=w_vertex[Fo], src_vertex=np.arange(len(prep.V)), region=reg[:, 0], src_tri=None,
                 tri_uvs=None if w_uv is None else w_uv[Fo], fixed=np.zeros(len(prep.V), bool), lib_seconds=lib,
-                notes=notes)
+                notes=notes, lib_error=float(err))
 
 
 def _split_regions(prep: _Prepared, lock: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -373,6 +395,8 @@ def _run(prep: _Prepared, method: str, target: int, cfg: SimplifyConfig, lock: n
     raise ConfigError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}", key="mesh.simplify.method")
 
 
+
+
 @dataclass
 class _Out:
     V: np.ndarray
@@ -389,14 +413,42 @@ class _Out:
     flipped: np.ndarray  # (t,) bool
     new_nonmanifold: np.ndarray  # (t,) bool: uses an edge with > 2 triangles the input did not have
     check_seconds: float = 0.0
+    repair_seconds: float = 0.0
     h: HausdorffResult | None = None  # the stage's error measure of this result, once taken
     flip: FlipResult | None = None
+    lib_error: float = 0.0
+    edge_turns: int = 0  # edges turned at sharp dihedrals right after the library
 
 
-def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceIndex, protect: np.ndarray,
-            scale: float, flip_cache: dict) -> _Out:
-    """Drop repeated-corner triangles, compact vertices, find and repair flips (the fit comes
-    after, in _fit)."""
+@dataclass
+class _Ctx:
+    """What every attempt shares: the input, its index and grid, the config, and caches."""
+    prep: "_Prepared"
+    cfg: SimplifyConfig
+    method: str
+    index_a: SurfaceIndex
+    grid_a: object  # simplify_measure.SurfaceGrid over the input
+    scale: float
+    protect: np.ndarray  # input vertices the fit and repairs never move (when unmoved)
+    chains: list = field(default_factory=list)  # border / seam chains of the input (meshopt locks)
+    chain_ends: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    flip_cache: dict = field(default_factory=dict)
+    repair_log: list = field(default_factory=list)
+    measures: int = 0
+    measure_seconds: float = 0.0
+
+
+def _local_error(ctx: _Ctx, V: np.ndarray, F: np.ndarray) -> repair.LocalError:
+    """The input's grid points, each assigned to its closest triangle of (V, F)."""
+    ib = SurfaceIndex(V, F, density=0)
+    _, near = ib.distance(ctx.grid_a.P)
+    return repair.LocalError(ctx.index_a, ctx.grid_a.P, near, len(F))
+
+
+def _finish(ctx: _Ctx, raw: _Raw) -> _Out:
+    """Drop repeated-corner triangles, compact vertices, turn edges at fins and folds, find and
+    repair flips (the fit comes after, in _fit)."""
+    prep, scale = ctx.prep, ctx.scale
     F = raw.F
     ok = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
     F = F[ok]
@@ -409,14 +461,24 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
     V = raw.V[used]
     F = remap[F]
     src_vertex = raw.src_vertex[used]
-    fixed = raw.fixed[used] | protect[src_vertex] & (np.linalg.norm(V - prep.V[src_vertex], axis=1) == 0)
+    fixed = raw.fixed[used] | ctx.protect[src_vertex] & (np.linalg.norm(V - prep.V[src_vertex], axis=1) == 0)
     if tri_uvs is None and prep.tri_uvs is not None and src_tri is not None:
         tri_uvs = prep.tri_uvs[src_tri]  # corner order is kept by the libraries
+    t = time.perf_counter()
+    turns = 0
+    if src_tri is None and len(F) > 1:
+        # fins and folds: turn edges at sharp dihedrals where that lowers the local error
+        # (methods that carry a source triangle per output triangle keep their triangles)
+        F = F.copy()
+        tri_uvs = None if tri_uvs is None else tri_uvs.copy()
+        le = _local_error(ctx, V, F)
+        turns = repair.flip_edges(V, F, region, tri_uvs, None, le)
+    repair_s = time.perf_counter() - t
     t = time.perf_counter()
     info_repair = None
 
     def check(Vc: np.ndarray, Fc: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
-        return _flip_check(index_a, Vc, Fc, cfg, scale, flip_cache, prev)
+        return _flip_check(ctx, Vc, Fc, prev)
 
     fr = check(V, F)
     before = (V.copy(), F.copy(), None if tri_uvs is None else tri_uvs.copy(), fr) if fr.flipped.any() else None
@@ -432,13 +494,13 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
     relocated = 0
     if fr.flipped.any():
         V = V.copy()
-        relocated = _relocate_repair(V, F, fixed, fr, index_a)
+        relocated = _relocate_repair(V, F, fixed, fr, ctx.index_a)
         if relocated:
             fr = check(V, F, fr)
     if before is not None and (edge_flips or relocated):
         # repairs act on what the flip check flagged; keep them only if they do not cost shape
         # where they act (the error over the repaired triangles and the ring around them)
-        e0, e1 = _repair_cost(index_a, before[0], before[1], V, F)
+        e0, e1 = _repair_cost(ctx.index_a, before[0], before[1], V, F)
         info_repair = {"local_error_before": e0 / scale, "local_error_after": e1 / scale}
         if e1 > 1.1 * e0 + 1e-12 * scale:
             V, F, tri_uvs, fr = before
@@ -450,76 +512,156 @@ def _finish(prep: _Prepared, raw: _Raw, cfg: SimplifyConfig, index_a: SurfaceInd
         info["repair_check"] = info_repair
     return _Out(V=V, F=F, src_vertex=src_vertex, region=region, src_tri=src_tri, tri_uvs=tri_uvs, fixed=fixed,
                 lib_seconds=raw.lib_seconds, fit_seconds=0.0, fit_info=info, notes=list(raw.notes),
-                flipped=fr.flipped, check_seconds=check_s, flip=fr,
-                new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex))
+                flipped=fr.flipped, check_seconds=check_s, repair_seconds=repair_s, flip=fr,
+                new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex), lib_error=raw.lib_error,
+                edge_turns=turns)
 
 
-def _flip_check(index_a: SurfaceIndex, V: np.ndarray, F: np.ndarray, cfg: SimplifyConfig, scale: float,
-                flip_cache: dict, prev: FlipResult | None = None) -> FlipResult:
+def _flip_check(ctx: _Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
     """The stage's flip check: only triangles not judged before (in ``prev``, else in the stage's
     last check) are measured; the result becomes the stage's last check."""
-    fr = flip_check(index_a, V, F, samples=min(cfg.error_samples, _FLIP_SAMPLES), scale=scale,
-                    prev=prev if prev is not None else flip_cache.get("last"))
-    flip_cache["last"] = fr
-    flip_cache["checked"] = flip_cache.get("checked", 0) + fr.checked
+    cache = ctx.flip_cache
+    fr = flip_check(ctx.index_a, V, F, samples=min(ctx.cfg.error_samples, _FLIP_SAMPLES), scale=ctx.scale,
+                    prev=prev if prev is not None else cache.get("last"))
+    cache["last"] = fr
+    cache["checked"] = cache.get("checked", 0) + fr.checked
     return fr
 
 
-def _fit(prep: _Prepared, out: _Out, cfg: SimplifyConfig, index_a: SurfaceIndex, fit_points: np.ndarray | None,
-         scale: float, flip_cache: dict) -> _Out:
-    """Refit the free vertices of a result (bake/mesh/simplify_fit.py); the fit is kept only if
-    it adds no flipped triangle (corners of any it turns are put back first) and the measured
-    error (max and mean) does not grow. The error measure taken here is the stage's own, kept on
-    the result (``out.h``): the stage does not measure it again."""
-    if cfg.fit_iterations <= 0 or fit_points is None or len(out.F) == 0:
-        return out
-    V, F, fr, fixed = out.V, out.F, out.flip, out.fixed
-    info = dict(out.fit_info)
-
-    def err(Vc: np.ndarray) -> HausdorffResult:
-        return hausdorff(prep.V, prep.F, Vc, F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
-
-    def check(Vc: np.ndarray, prev: FlipResult) -> FlipResult:
-        return _flip_check(index_a, Vc, F, cfg, scale, flip_cache, prev)
-
-    t = time.perf_counter()
-    Vf, fit_info = refit(V, F, fixed, index_a, fit_points, iterations=cfg.fit_iterations,
-                         samples_b=min(cfg.error_samples, 20000), seed=cfg.seed)
-    info.update(fit_info)
-    fit_s = time.perf_counter() - t
-    t = time.perf_counter()
-    # the fit must not turn a triangle against the original surface: put back the corners
-    # of any triangle it flipped, and check again (only the triangles that moved)
+def _no_new_flips(ctx: _Ctx, V0: np.ndarray, Vn: np.ndarray, F: np.ndarray, fr: FlipResult,
+                  info: dict) -> tuple[np.ndarray, FlipResult, bool]:
+    """Put back the corners of any triangle a move (V0 -> Vn) turned against the input (a few
+    rounds, only the triangles that moved are checked). Returns (positions, flip result, whether
+    no new flip is left)."""
+    Vn = Vn.copy()
     ff = fr
     for _ in range(6):
-        ff = check(Vf, ff)
+        ff = _flip_check(ctx, Vn, F, ff)
         new = ff.flipped & ~fr.flipped
         if not new.any():
-            break
+            return Vn, ff, True
         back = np.unique(F[new].ravel())
-        moved = back[(Vf[back] != V[back]).any(axis=1)]
+        moved = back[(Vn[back] != V0[back]).any(axis=1)]
         if len(moved) == 0:
             break
         info["reverted_vertices"] = info.get("reverted_vertices", 0) + int(len(moved))
-        Vf[moved] = V[moved]
-    else:
-        ff = check(Vf, ff)
-    keep_fit = not (ff.flipped & ~fr.flipped).any()  # else: could not be repaired vertex by vertex
-    h = None
-    if keep_fit:
-        # the fit works from approximate closest points; keep it only where it measurably
-        # helps (on CAD-like meshes with slivers the correspondences can mislead it)
-        h0 = err(V)
-        h1 = err(Vf)
-        keep_fit = h1.max <= h0.max and h1.mean <= h0.mean
-        info["kept"] = bool(keep_fit)
-        h = h1 if keep_fit else h0
-    else:
+        Vn[moved] = V0[moved]
+    ff = _flip_check(ctx, Vn, F, ff)
+    return Vn, ff, not (ff.flipped & ~fr.flipped).any()
+
+
+def _fit(ctx: _Ctx, out: _Out) -> _Out:
+    """Refit the free vertices of a result (bake/mesh/simplify_fit.py), adding no flipped
+    triangle (corners of any it turns are put back). Whether the fit is kept is decided by the
+    caller, on the measured error."""
+    cfg = ctx.cfg
+    if cfg.fit_iterations <= 0 or len(out.F) == 0:
+        return out
+    V, F, fr, fixed = out.V, out.F, out.flip, out.fixed
+    info = dict(out.fit_info)
+    t = time.perf_counter()
+    Vf, fit_info = refit(V, F, fixed, ctx.index_a, ctx.grid_a.P, iterations=cfg.fit_iterations,
+                         samples_b=min(cfg.error_samples, 8000), seed=cfg.seed)
+    info.update(fit_info)
+    fit_s = time.perf_counter() - t
+    t = time.perf_counter()
+    Vf, ff, ok = _no_new_flips(ctx, V, Vf, F, fr, info)
+    if not ok:
         info["abandoned"] = True
-    if keep_fit:
-        V, fr = Vf, ff
-    return replace(out, V=V, flipped=fr.flipped, flip=fr, fit_seconds=fit_s, fit_info=info, h=h,
+        return replace(out, fit_info=info, fit_seconds=fit_s, check_seconds=out.check_seconds + time.perf_counter() - t)
+    return replace(out, V=Vf, flipped=ff.flipped, flip=ff, fit_seconds=fit_s, fit_info=info, h=None,
                    check_seconds=out.check_seconds + time.perf_counter() - t)
+
+
+def _measure(ctx: _Ctx, out: _Out) -> HausdorffResult:
+    if out.h is None:
+        t = time.perf_counter()
+        out.h = hausdorff(ctx.prep.V, ctx.prep.F, out.V, out.F, points=ctx.cfg.error_samples, index_a=ctx.index_a,
+                          grid_a=ctx.grid_a)
+        ctx.measures += 1
+        ctx.measure_seconds += time.perf_counter() - t
+    return out.h
+
+
+def _peak_triangles(out: _Out, h: HausdorffResult, scale: float) -> np.ndarray:
+    """Triangles of the result where the error is within _PEAK_SHARE of the maximum (separate
+    places, at most _PEAKS): those holding the largest simplified -> original distances, and
+    those closest to the original's points with the largest distances the other way."""
+    cand_p, cand_d, cand_t = [], [], []
+    ab, ba = h.a_to_b, h.b_to_a
+    if ba is not None and len(ba.peak_points):
+        cand_p.append(ba.peak_points)
+        cand_d.append(ba.peak_dists)
+        cand_t.append(ba.peak_tris)
+    if ab is not None and len(ab.peak_points):
+        ib = SurfaceIndex(out.V, out.F, density=0)
+        _, near = ib.distance(ab.peak_points)
+        cand_p.append(ab.peak_points)
+        cand_d.append(ab.peak_dists)
+        cand_t.append(near)
+    if not cand_p:
+        return np.zeros(0, np.int64)
+    P, D, T = np.concatenate(cand_p), np.concatenate(cand_d), np.concatenate(cand_t)
+    order = np.argsort(-D, kind="stable")
+    P, D, T = P[order], D[order], T[order]
+    keep = D >= _PEAK_SHARE * D[0]
+    P, D, T = P[keep], D[keep], T[keep]
+    # separate places: one per box of 0.5% of the diagonal
+    box = np.floor(P / (0.005 * scale)).astype(np.int64)
+    box -= box.min(axis=0)
+    span = box.max(axis=0) + 1
+    flat = (box[:, 0] * span[1] + box[:, 1]) * span[2] + box[:, 2]
+    _, first = np.unique(flat, return_index=True)
+    first.sort()
+    T = T[first[:_PEAKS]]
+    return np.unique(T[T >= 0])
+
+
+def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffResult, list[dict]]:
+    """``refine_rounds`` rounds of local repair where the error peaks (module docstring, step 3).
+    Each round: turn edges of the peak triangles where that lowers the local error, move their
+    free corners to lower the local maximum, put back any corner that turned a triangle against
+    the input, and measure again; a round that does not lower the measured maximum is undone
+    and ends the refinement."""
+    log: list[dict] = []
+    cfg = ctx.cfg
+    for _ in range(cfg.refine_rounds):
+        t = time.perf_counter()
+        tris = _peak_triangles(out, h, ctx.scale)
+        if len(tris) == 0:
+            break
+        V, F = out.V.copy(), out.F.copy()
+        tri_uvs = None if out.tri_uvs is None else out.tri_uvs.copy()
+        le = _local_error(ctx, V, F)
+        turned = 0
+        if out.src_tri is None:
+            turned = repair.flip_edges(V, F, out.region, tri_uvs, None, le, candidates=tris)
+        fr = _flip_check(ctx, V, F, out.flip) if turned else out.flip
+        V_before = V.copy()
+        verts = np.unique(F[tris].ravel())
+        moved, _ = repair.polish(V, F, out.fixed, le, verts, ref=fr.ref if fr is not None else None)
+        info: dict = {}
+        ff = fr
+        if moved:
+            V, ff, _ = _no_new_flips(ctx, V_before, V, F, fr, info)
+        rec = {"peak_triangles": int(len(tris)), "edges_turned": int(turned), "vertices_moved": int(moved),
+               "reverted_vertices": int(info.get("reverted_vertices", 0))}
+        repair_s = time.perf_counter() - t
+        if not (turned or moved) or int(ff.flipped.sum()) > int(out.flipped.sum()):
+            rec["kept"] = False
+            log.append(rec)
+            break
+        o2 = replace(out, V=V, F=F, tri_uvs=tri_uvs, flipped=ff.flipped, flip=ff, h=None,
+                     new_nonmanifold=_new_nonmanifold_triangles(ctx.prep, F, out.src_vertex) if turned
+                     else out.new_nonmanifold, repair_seconds=out.repair_seconds + repair_s)
+        h2 = _measure(ctx, o2)
+        rec["hausdorff_max"] = float(h2.max / ctx.scale)
+        rec["kept"] = bool(h2.max < h.max and _defects(o2) <= _defects(out))
+        log.append(rec)
+        if not rec["kept"]:
+            break
+        out, h = o2, h2
+    return out, h, log
 
 
 def _edge_flip_repair(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.ndarray | None,
@@ -680,22 +822,6 @@ def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.nd
     return bad
 
 
-def _peaks(h, scale: float, most: int = _REFINE_PEAKS, share: float = 0.8, spacing: float = 0.02) -> np.ndarray:
-    """Where the error peaks: the worst point and up to ``most - 1`` more of the verified
-    largest distances within ``share`` of the maximum, at least ``spacing`` of the diagonal
-    apart (a few dozen points at most: a loop over them is cheap)."""
-    if h.top_points is None or len(h.top_points) == 0:
-        return np.asarray(h.worst_point, np.float64)[None]
-    pts = h.top_points[h.top_dists >= share * h.top_dists[0]]
-    keep = [pts[0]]
-    for p in pts[1:]:
-        if len(keep) >= most:
-            break
-        if np.linalg.norm(np.asarray(keep) - p, axis=1).min() >= spacing * scale:
-            keep.append(p)
-    return np.asarray(keep)
-
-
 def _defects(out: _Out) -> int:
     return int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
 
@@ -794,6 +920,34 @@ def _attributes(prep: _Prepared, out: _Out, index_a: SurfaceIndex | None, notes:
     return res
 
 
+
+
+def _border_chord_max(prep: "_Prepared", out: _Out, chains: list, scale: float) -> float:
+    """How far the output's border and material-edge chords stray from the input's chains:
+    the largest distance from an input chain vertex to the output's border/seam edges (0 if
+    the input has none). Fraction of the diagonal."""
+    if not chains:
+        return 0.0
+    verts = np.unique(np.concatenate(chains))
+    o_chains, _ = repair.border_chains(out.F, _region_edge_vertices(out.F, out.region, len(out.V))[1])
+    if not o_chains:
+        return float("nan")
+    segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in o_chains if len(c) > 1] +
+                          [np.array([[c[-1], c[0]]]) for c in o_chains if len(c) > 2])
+    a, b = out.V[segs[:, 0]], out.V[segs[:, 1]]
+    P = prep.V[verts]
+    best = np.full(len(P), np.inf)
+    for s in range(0, len(segs), 2048):
+        aa, bb = a[s:s + 2048], b[s:s + 2048]
+        ab = bb - aa
+        L = np.einsum("ij,ij->i", ab, ab)
+        X = P[:, None, :] - aa[None]
+        t = np.clip(np.einsum("pij,ij->pi", X, ab) / np.where(L > 0, L, 1.0), 0, 1)
+        d = np.linalg.norm(X - t[..., None] * ab[None], axis=2).min(axis=1)
+        best = np.minimum(best, d)
+    return float(best.max()) / scale
+
+
 def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord]:
     """The stage body (see the module docstring)."""
     t0 = time.perf_counter()
@@ -829,36 +983,55 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         rec.seconds = time.perf_counter() - t0
         return scene, rec
 
+    t_prep = time.perf_counter()
     index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed, scale=scale)
-    fit_points = None
-    if cfg.fit_iterations > 0:
-        rng = np.random.default_rng(cfg.seed + 3)
-        pts, _, _ = sample_surface(prep.V, prep.F, cfg.error_samples, rng)
-        used_v = np.unique(prep.F.ravel())
-        if len(used_v) > _FIT_MAX_VERTICES:
-            used_v = np.sort(rng.choice(used_v, _FIT_MAX_VERTICES, replace=False))
-        fit_points = np.concatenate([pts, prep.V[used_v]])
-    # vertices the fit leaves alone: material edges and non-manifold edges (open borders may
-    # move: the fit pulls them onto the original surface like any other vertex)
+    grid_a = surface_grid(prep.V, prep.F, cfg.error_samples)
+    # vertices the fit and the repairs leave alone: material edges, non-manifold edges and (with
+    # preserve_border) open borders
     edge_mask, region_edges = _region_edge_vertices(prep.F, prep.region, len(prep.V))
+    e_in, c_in, _ = edge_counts(prep.F)
+    border_mask = np.zeros(len(prep.V), bool)
+    border_mask[e_in[c_in == 1].ravel()] = True
     protect = edge_mask | _nonmanifold_vertices(prep.F, len(prep.V))
-
-    repair_log: list[dict] = []
-    flip_cache: dict = {}  # the last flip check (verdicts are per triangle: reused across attempts)
+    if cfg.preserve_border:
+        protect |= border_mask
+    chains, chain_ends = [], np.zeros(0, np.int64)
+    if method == "meshopt":
+        # the input's border and seam chains (open borders, material edges, UV seams): the
+        # library's wedge borders, in input vertex numbers
+        Fw, w_vertex, _, _ = _wedges(prep)
+        we, wc, _ = edge_counts(Fw)
+        seams = w_vertex[we[wc == 1]]
+        chains, chain_ends = repair.border_chains(prep.F, seams)
+    ctx = _Ctx(prep=prep, cfg=cfg, method=method, index_a=index_a, grid_a=grid_a, scale=scale, protect=protect,
+               chains=chains, chain_ends=chain_ends)
+    prep_s = time.perf_counter() - t_prep
 
     cap = float(cfg.error_ceiling) * scale if kind == "triangles" else 0.0
+    border_log: dict = {}
 
     def attempt(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS) -> _Out:
         """Simplify; while triangles come out flipped, keep the input vertices under them
         (locked) and simplify again (a few rounds)."""
         lock = np.zeros(len(prep.V), bool) if lock0 is None else lock0.copy()
+        lib_s = 0.0
+        if ctx.chains:
+            # keep each border/seam chain within half the library's error estimate of itself
+            raw0 = _run(prep, method, target, cfg, lock, cap)
+            lib_s += raw0.lib_seconds
+            tol = _BORDER_TOLERANCE * raw0.lib_error
+            blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V))
+            border_log.update({"tolerance": tol / scale, "locked_vertices": int(blk.sum()),
+                               "chain_vertices": int(sum(len(c) for c in ctx.chains))})
+            lock |= blk
         best = None
         for rnd in range(rounds + 1):
             raw = _run(prep, method, target, cfg, lock, cap)
-            out = _fit(prep, _finish(prep, raw, cfg, index_a, protect, scale, flip_cache), cfg, index_a, fit_points,
-                       scale, flip_cache)
-            n_flip = int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
-            if best is None or n_flip < int(best.flipped.sum()) + int(best.new_nonmanifold.sum()):
+            raw.lib_seconds += lib_s
+            lib_s = 0.0
+            out = _finish(ctx, raw)
+            n_flip = _defects(out)
+            if best is None or n_flip < _defects(best):
                 best = out
             if n_flip == 0 or rnd == rounds:
                 break
@@ -866,22 +1039,36 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             if not (add & ~lock).any():
                 break
             lock |= add
-            repair_log.append({"target": int(target), "round": rnd + 1, "flipped": int(out.flipped.sum()),
-                               "on_new_nonmanifold_edges": int(out.new_nonmanifold.sum()),
-                               "locked_vertices": int(lock.sum())})
+            ctx.repair_log.append({"target": int(target), "round": rnd + 1, "flipped": int(out.flipped.sum()),
+                                   "on_new_nonmanifold_edges": int(out.new_nonmanifold.sum()),
+                                   "locked_vertices": int(lock.sum())})
         return best
 
-    def measure(out: _Out):
-        if out.h is not None:  # measured by _fit with these very samples, or before
-            return out.h
-        out.h = hausdorff(prep.V, prep.F, out.V, out.F, samples=cfg.error_samples, seed=cfg.seed, index_a=index_a)
-        return out.h
+    measuring = cfg.measure_error or kind == "error"
+
+    def fitted(out: _Out) -> tuple[_Out, HausdorffResult | None]:
+        """The fit, kept only if the measured maximum does not grow (measure_error), and the
+        measure of what is kept."""
+        if cfg.fit_iterations <= 0:
+            return out, (_measure(ctx, out) if measuring else None)
+        o1 = _fit(ctx, out)
+        if not measuring or o1 is out:
+            return o1, (_measure(ctx, o1) if measuring else None)
+        h0 = _measure(ctx, out)
+        h1 = _measure(ctx, o1)
+        keep = h1.max <= h0.max
+        o1.fit_info["kept"] = bool(keep)
+        out.fit_info = dict(o1.fit_info)
+        return (o1, h1) if keep else (replace(out, fit_seconds=o1.fit_seconds), h0)
+
+    def whole(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS):
+        return fitted(attempt(target, lock0, rounds))
 
     probes: list[dict] = []
+    refine_log: list[dict] = []
     if kind == "triangles":
         target = int(value)
-        out = attempt(target)
-        h = measure(out) if cfg.measure_error else None
+        out, h = whole(target)
 
         def acceptable(o: _Out, hh) -> bool:
             return _defects(o) == 0 and (hh is None or cap <= 0 or hh.max <= cap)
@@ -891,8 +1078,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             # smallest count above the target that does not
             why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
                    f"non-manifold edges" if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
-            n, o2, h2 = _back_off(target, T0, attempt, measure if cfg.measure_error else None, acceptable,
-                                  probes, scale)
+            n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
                 rec.warn(f"{target} triangles would cost {why} (error_ceiling = {cfg.error_ceiling}); "
                          f"stopped at {len(o2.F)} triangles instead")
@@ -900,27 +1086,13 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                 details["backed_off_from"] = target
             details["probes"] = probes
         if h is not None and cfg.refine_rounds:
-            # keep the input vertices of the triangle where the error peaked and try again;
-            # the better result (no more flips, smaller maximum) is kept
-            wlock = np.zeros(len(prep.V), bool)
-            last = h
-            for _ in range(cfg.refine_rounds):
-                _, wt, _ = index_a.query(_peaks(last, scale))
-                wlock[prep.F[wt]] = True
-                o2 = attempt(target, wlock)
-                hw = measure(o2)
-                keep = bool(hw.max < h.max and _defects(o2) <= _defects(out)
-                            and len(o2.F) <= max(len(out.F), target * 1.01)
-                            and abs(len(o2.F) - target) <= max(abs(len(out.F) - target), 0.01 * target))
-                details.setdefault("refine_rounds", []).append(
-                    {"locked_vertices": int(wlock.sum()), "hausdorff_max": float(hw.max / scale), "kept": keep})
-                if keep:
-                    out, h = o2, hw
-                last = hw
+            out, h, refine_log = _refine(ctx, out, h)
     else:
-        target, out, h = _search_error(prep, method, value * scale, T0, attempt, measure, probes, scale)
+        target, out, h = _search_error(prep, method, value * scale, T0, whole, probes, scale)
         details["max_error_target"] = value
         details["probes"] = probes
+        if cfg.refine_rounds:
+            out, h, refine_log = _refine(ctx, out, h)
     notes.extend(out.notes)
     attrs = _attributes(prep, out, index_a, notes)
 
@@ -928,9 +1100,16 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     topo_in = topology(prep.F)
     topo_out = topology(out.F)
     flips = out.flipped
+    folds_in = repair.folds(prep.V, prep.F)
+    folds_out = repair.folds(out.V, out.F)
     out_edge_mask, out_region_edges = _region_edge_vertices(out.F, out.region, len(out.V))
     off_boundary = int((out_edge_mask & ~edge_mask[out.src_vertex]).sum())
     moved_boundary = int((out_edge_mask & (np.linalg.norm(out.V - prep.V[out.src_vertex], axis=1) > 0)).sum())
+    e_out, c_out, _ = edge_counts(out.F)
+    out_border = np.zeros(len(out.V), bool)
+    out_border[e_out[c_out == 1].ravel()] = True
+    border_off = int((out_border & ~border_mask[out.src_vertex]).sum())
+    border_moved = int((out_border & (np.linalg.norm(out.V - prep.V[out.src_vertex], axis=1) > 0)).sum())
 
     T1 = len(out.F)
     if kind == "triangles":
@@ -951,11 +1130,16 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     new_mis = max(0, topo_out["misoriented_edges"] - topo_in["misoriented_edges"])
     if int(flips.sum()):
         rec.warn(f"{int(flips.sum())} triangle(s) face against the original surface")
+    if len(folds_out) > len(folds_in):
+        rec.warn(f"{len(folds_out)} fold(s): neighbouring triangles whose normals point against each other "
+                 f"(the input has {len(folds_in)})")
     if new_nm or new_mis:
         rec.warn(f"{new_nm} new non-manifold edge(s), {new_mis} new mis-oriented edge(s)")
     if off_boundary or moved_boundary:
         rec.warn(f"{off_boundary} material-edge vertices are not input material-edge vertices; "
                  f"{moved_boundary} moved")
+    if cfg.preserve_border and (border_off or border_moved):
+        rec.warn(f"{border_off} border vertices are not input border vertices; {border_moved} moved")
     for n in notes:
         rec.warn(n)
 
@@ -980,26 +1164,47 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         if not h.exact:
             rec.warnings.append("the Hausdorff max is an upper bound: verifying it exactly would have measured "
                                 "millions of point-triangle pairs (loose bounds on large overlapping triangles)")
-    rec.accuracy.update({"flipped_triangles": int(flips.sum()), "new_nonmanifold_edges": new_nm,
-                         "new_misoriented_edges": new_mis})
+    rec.accuracy.update({"flipped_triangles": int(flips.sum()), "folds": int(len(folds_out)),
+                         "new_nonmanifold_edges": new_nm, "new_misoriented_edges": new_mis})
+    sample = None
+    if h is not None:
+        sample = {"original_grid_points": int(h.a_to_b.grid_points), "simplified_grid_points": int(h.b_to_a.grid_points),
+                  "refinement_points": int(h.refine_points),
+                  "original_spacing": float(h.a_to_b.spacing / scale), "simplified_spacing": float(h.b_to_a.spacing / scale),
+                  "max_is": ("sampled: the largest exact distance at a point of the sample (the true maximum "
+                             "over the surfaces can only be larger)" if h.exact else
+                             "an upper bound of the largest distance at a point of the sample")}
     details.update({
         "target_triangles": int(target),
         "library_seconds": round(out.lib_seconds, 6),
+        "prepare_seconds": round(prep_s, 6),
         "fit_seconds": round(out.fit_seconds, 6),
+        "repair_seconds": round(out.repair_seconds, 6),
         "check_seconds": round(out.check_seconds, 6),
-        "flip_repairs": repair_log,
-        "flip_checked_triangles": int(flip_cache.get("checked", 0)),
+        "measure_seconds": round(ctx.measure_seconds, 6),
+        "measures": int(ctx.measures),
+        "flip_repairs": ctx.repair_log,
+        "flip_checked_triangles": int(ctx.flip_cache.get("checked", 0)),
+        "edges_turned_at_sharp_angles": int(out.edge_turns),
         "fit": out.fit_info,
+        "refine": refine_log,
         "error_samples": int(cfg.error_samples) if h is not None else 0,
-        "error_metric": "symmetric Hausdorff over all vertices + area-weighted samples; distances to the "
-                        "closest of k KD-tree candidate triangles (upper bounds), the max verified exact "
-                        "(bake/mesh/simplify_error.py); fractions of the bbox diagonal",
-        "hausdorff_max_exact": None if h is None else bool(h.exact),
+        "error_sample": sample,
+        "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
+                        "inside every triangle), refined 8 times around the 24 largest distances, the largest "
+                        "made exact at their points (bake/mesh/simplify_measure.py); fractions of the bbox diagonal",
+        "hausdorff_max_exact": False if h is not None else None,
         "worst_point": None if h is None else [float(x) for x in h.worst_point],
         "topology_in": topo_in, "topology_out": topo_out,
+        "folds_in": int(len(folds_in)), "folds_out": int(len(folds_out)),
+        "fold_pairs": [[int(a), int(b)] for a, b in folds_out[:20]],
         "material_edges_in": int(len(region_edges)), "material_edges_out": int(len(out_region_edges)),
         "material_edge_vertices_off_input_edges": off_boundary,
         "material_edge_vertices_moved": moved_boundary,
+        "border_vertices_off_input_border": border_off,
+        "border_vertices_moved": border_moved,
+        "border_locks": border_log,
+        "border_chord_max": _border_chord_max(prep, out, chains, scale) if chains else 0.0,
         "attributes": _attribute_notes(prep, out, method),
         "polygons": "dropped: every output triangle has tri_polygon = -1",
     })
@@ -1022,14 +1227,13 @@ def _attribute_notes(prep: _Prepared, out: _Out, method: str) -> dict:
     return how
 
 
-def _back_off(target: int, T0: int, attempt, measure, acceptable, probes: list, scale: float):
+def _back_off(target: int, T0: int, whole, acceptable, probes: list, scale: float):
     """Smallest count in (target, T0] whose result is acceptable (grow by 30% until one is,
     then bisect a few times). Returns (count, out, hausdorff) or (target, None, None)."""
     tried: dict[int, tuple] = {}
 
     def probe(n: int) -> bool:
-        out = attempt(n, None, 0)  # no lock-and-retry rounds here: backing off is the repair
-        h = measure(out) if measure is not None else None
+        out, h = whole(n, None, 0)  # no lock-and-retry rounds here: backing off is the repair
         ok = acceptable(out, h)
         tried[n] = (out, h, ok)
         probes.append({"target": n, "triangles": int(len(out.F)), "defects": _defects(out),
@@ -1059,8 +1263,7 @@ def _back_off(target: int, T0: int, attempt, measure, acceptable, probes: list, 
     return good, out, h
 
 
-def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, attempt, measure, probes: list,
-                  scale: float):
+def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, whole, probes: list, scale: float):
     """Smallest triangle count (within ~5%) whose measured Hausdorff max is <= e_abs."""
     tried: dict[int, tuple] = {}
 
@@ -1068,8 +1271,7 @@ def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, attempt, 
         n = int(min(max(n, 4), T0))
         if n in tried:
             return tried[n]
-        out = attempt(n)
-        h = measure(out)
+        out, h = whole(n)
         tried[n] = (out, h)
         probes.append({"target": n, "triangles": int(len(out.F)), "hausdorff_max": float(h.max) / scale,
                        "defects": _defects(out), "ok": bool(h.max <= e_abs and _defects(out) == 0)})

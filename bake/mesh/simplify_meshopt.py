@@ -75,7 +75,8 @@ def version() -> str | None:
 
 def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int, *,
              target_error: float = 1e30, absolute_error: bool = False, lock: np.ndarray | None = None,
-             lock_border: bool = False) -> tuple[np.ndarray, float]:
+             lock_border: bool = False, attributes: np.ndarray | None = None,
+             attribute_weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Simplify ``triangles`` (T, 3) over ``positions`` (V, 3) to at most ``target_triangles``
     or until the next collapse would cost more than ``target_error`` (relative to the mesh
     extent, or absolute with ``absolute_error``). Returns (triangles (T', 3) int64 indexing
@@ -92,8 +93,15 @@ def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int
     if len(pos) and not np.isfinite(pos).all():
         raise ValueError("positions do not fit in float32")
     dst = np.empty(max(len(idx), 3), dtype=np.uint32)
-    attr = np.zeros(1, dtype=np.float32)  # no attributes (count 0); a valid pointer all the same
-    weights = np.zeros(1, dtype=np.float32)
+    if attributes is not None:
+        attr = np.ascontiguousarray(np.asarray(attributes, np.float64).reshape(len(pos), -1), dtype=np.float32)
+        weights = np.ascontiguousarray(np.asarray(attribute_weights, np.float64).reshape(-1), dtype=np.float32)
+        assert len(weights) == attr.shape[1]
+        n_attr = attr.shape[1]
+    else:
+        attr = np.zeros((1, 1), dtype=np.float32)  # no attributes (count 0); a valid pointer all the same
+        weights = np.zeros(1, dtype=np.float32)
+        n_attr = 0
     if lock is not None:
         lk = np.ascontiguousarray(np.asarray(lock, dtype=bool), dtype=np.uint8)
         assert lk.shape == (len(pos),)
@@ -106,7 +114,7 @@ def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int
     n = lib.meshopt_simplifyWithAttributes(
         dst.ctypes.data_as(P(ctypes.c_uint)), idx.ctypes.data_as(P(ctypes.c_uint)), len(idx),
         pos.ctypes.data_as(P(ctypes.c_float)), len(pos), 12,
-        attr.ctypes.data_as(P(ctypes.c_float)), 4, weights.ctypes.data_as(P(ctypes.c_float)), 0,
+        attr.ctypes.data_as(P(ctypes.c_float)), 4 * max(n_attr, 1), weights.ctypes.data_as(P(ctypes.c_float)), n_attr,
         lock_ptr, int(max(0, target_triangles)) * 3, float(target_error), options, ctypes.byref(err))
     del lk
     return dst[:n].reshape(-1, 3).astype(np.int64), float(err.value)

@@ -82,10 +82,12 @@ from ..record import StageRecord
 from ..scene import Scene
 from . import simplify_meshopt
 from . import simplify_repair as repair
+from scipy.spatial import cKDTree
+
 from .simplify_error import (FlipResult, SurfaceIndex, bounding_spheres, edge_counts, flip_check, topology,
                              triangle_pattern)
 from .simplify_fit import refit
-from .simplify_measure import HausdorffResult, hausdorff, surface_grid
+from .simplify_measure import ROUNDS, SEEDS, HausdorffResult, directed, hausdorff, surface_grid
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
@@ -418,6 +420,7 @@ class _Out:
     flip: FlipResult | None = None
     lib_error: float = 0.0
     edge_turns: int = 0  # edges turned at sharp dihedrals right after the library
+    folded: np.ndarray | None = None  # (t,) bool: in a fold the input does not have there
 
 
 @dataclass
@@ -436,13 +439,14 @@ class _Ctx:
     repair_log: list = field(default_factory=list)
     measures: int = 0
     measure_seconds: float = 0.0
+    fold_zones: np.ndarray | None = None  # centroids of the input's own folded triangles
 
 
-def _local_error(ctx: _Ctx, V: np.ndarray, F: np.ndarray) -> repair.LocalError:
+def _local_error(ctx: _Ctx, V: np.ndarray, F: np.ndarray, spacing: float = 0.0) -> repair.LocalError:
     """The input's grid points, each assigned to its closest triangle of (V, F)."""
-    ib = SurfaceIndex(V, F, density=0)
+    ib = SurfaceIndex(V, F)
     _, near = ib.distance(ctx.grid_a.P)
-    return repair.LocalError(ctx.index_a, ctx.grid_a.P, near, len(F))
+    return repair.LocalError(ctx.index_a, ctx.grid_a.P, near, len(F), spacing=spacing)
 
 
 def _finish(ctx: _Ctx, raw: _Raw) -> _Out:
@@ -506,15 +510,26 @@ def _finish(ctx: _Ctx, raw: _Raw) -> _Out:
             V, F, tri_uvs, fr = before
             edge_flips = relocated = 0
             info_repair["undone"] = True
+    folded = _new_folds(ctx, V, F)
+    unfolded = 0
+    if folded.any():
+        # a fold the edge turns could not undo: move a free corner to the middle of its
+        # neighbours on the input surface, where every triangle around it then faces the input
+        V = V.copy()
+        unfolded = _relocate_repair(V, F, fixed, replace(fr, flipped=folded), ctx.index_a)
+        if unfolded:
+            fr = check(V, F, fr)
+            folded = _new_folds(ctx, V, F)
     check_s = time.perf_counter() - t
-    info = {"rounds": 0, "reverted_vertices": 0, "edge_flips": edge_flips, "relocated_vertices": relocated}
+    info = {"rounds": 0, "reverted_vertices": 0, "edge_flips": edge_flips, "relocated_vertices": relocated,
+            "unfolded_vertices": unfolded}
     if info_repair is not None:
         info["repair_check"] = info_repair
     return _Out(V=V, F=F, src_vertex=src_vertex, region=region, src_tri=src_tri, tri_uvs=tri_uvs, fixed=fixed,
                 lib_seconds=raw.lib_seconds, fit_seconds=0.0, fit_info=info, notes=list(raw.notes),
                 flipped=fr.flipped, check_seconds=check_s, repair_seconds=repair_s, flip=fr,
                 new_nonmanifold=_new_nonmanifold_triangles(prep, F, src_vertex), lib_error=raw.lib_error,
-                edge_turns=turns)
+                edge_turns=turns, folded=folded)
 
 
 def _flip_check(ctx: _Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
@@ -528,6 +543,21 @@ def _flip_check(ctx: _Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None
     return fr
 
 
+def _new_folds(ctx: _Ctx, V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(t,) triangles in a fold (simplify_repair.folds) that is not where the input has one of
+    its own (within 1% of the diagonal of an input fold)."""
+    mask = np.zeros(len(F), bool)
+    pairs = repair.folds(V, F)
+    if len(pairs) == 0:
+        return mask
+    tris = np.unique(pairs.ravel())
+    if ctx.fold_zones is not None and len(ctx.fold_zones):
+        d, _ = cKDTree(ctx.fold_zones).query(V[F[tris]].mean(axis=1))
+        tris = tris[d > 0.01 * ctx.scale]
+    mask[tris] = True
+    return mask
+
+
 def _no_new_flips(ctx: _Ctx, V0: np.ndarray, Vn: np.ndarray, F: np.ndarray, fr: FlipResult,
                   info: dict) -> tuple[np.ndarray, FlipResult, bool]:
     """Put back the corners of any triangle a move (V0 -> Vn) turned against the input (a few
@@ -535,9 +565,10 @@ def _no_new_flips(ctx: _Ctx, V0: np.ndarray, Vn: np.ndarray, F: np.ndarray, fr: 
     no new flip is left)."""
     Vn = Vn.copy()
     ff = fr
+    folded0 = _new_folds(ctx, V0, F)
     for _ in range(6):
         ff = _flip_check(ctx, Vn, F, ff)
-        new = ff.flipped & ~fr.flipped
+        new = (ff.flipped & ~fr.flipped) | (_new_folds(ctx, Vn, F) & ~folded0)
         if not new.any():
             return Vn, ff, True
         back = np.unique(F[new].ravel())
@@ -547,7 +578,7 @@ def _no_new_flips(ctx: _Ctx, V0: np.ndarray, Vn: np.ndarray, F: np.ndarray, fr: 
         info["reverted_vertices"] = info.get("reverted_vertices", 0) + int(len(moved))
         Vn[moved] = V0[moved]
     ff = _flip_check(ctx, Vn, F, ff)
-    return Vn, ff, not (ff.flipped & ~fr.flipped).any()
+    return Vn, ff, not ((ff.flipped & ~fr.flipped) | (_new_folds(ctx, Vn, F) & ~folded0)).any()
 
 
 def _fit(ctx: _Ctx, out: _Out) -> _Out:
@@ -570,6 +601,7 @@ def _fit(ctx: _Ctx, out: _Out) -> _Out:
         info["abandoned"] = True
         return replace(out, fit_info=info, fit_seconds=fit_s, check_seconds=out.check_seconds + time.perf_counter() - t)
     return replace(out, V=Vf, flipped=ff.flipped, flip=ff, fit_seconds=fit_s, fit_info=info, h=None,
+                   folded=_new_folds(ctx, Vf, F),
                    check_seconds=out.check_seconds + time.perf_counter() - t)
 
 
@@ -583,85 +615,155 @@ def _measure(ctx: _Ctx, out: _Out) -> HausdorffResult:
     return out.h
 
 
-def _peak_triangles(out: _Out, h: HausdorffResult, scale: float) -> np.ndarray:
-    """Triangles of the result where the error is within _PEAK_SHARE of the maximum (separate
-    places, at most _PEAKS): those holding the largest simplified -> original distances, and
-    those closest to the original's points with the largest distances the other way."""
-    cand_p, cand_d, cand_t = [], [], []
-    ab, ba = h.a_to_b, h.b_to_a
-    if ba is not None and len(ba.peak_points):
-        cand_p.append(ba.peak_points)
-        cand_d.append(ba.peak_dists)
-        cand_t.append(ba.peak_tris)
-    if ab is not None and len(ab.peak_points):
-        ib = SurfaceIndex(out.V, out.F, density=0)
-        _, near = ib.distance(ab.peak_points)
-        cand_p.append(ab.peak_points)
-        cand_d.append(ab.peak_dists)
-        cand_t.append(near)
-    if not cand_p:
-        return np.zeros(0, np.int64)
-    P, D, T = np.concatenate(cand_p), np.concatenate(cand_d), np.concatenate(cand_t)
-    order = np.argsort(-D, kind="stable")
-    P, D, T = P[order], D[order], T[order]
-    keep = D >= _PEAK_SHARE * D[0]
-    P, D, T = P[keep], D[keep], T[keep]
-    # separate places: one per box of 0.5% of the diagonal
-    box = np.floor(P / (0.005 * scale)).astype(np.int64)
-    box -= box.min(axis=0)
-    span = box.max(axis=0) + 1
-    flat = (box[:, 0] * span[1] + box[:, 1]) * span[2] + box[:, 2]
-    _, first = np.unique(flat, return_index=True)
-    first.sort()
-    T = T[first[:_PEAKS]]
-    return np.unique(T[T >= 0])
+class _Tracker:
+    """The error around each triangle of a result as the measure ``h`` saw it, kept up to date
+    while the refine rounds change a few triangles: per triangle, the largest distance from its
+    grid (and the refinement) to the input, and the largest distance of the input's measured
+    points whose closest triangle it is. A changed triangle is measured again (its grid at the
+    measure's spacing, refined); an input point whose closest triangle changed is measured
+    again against the whole result; the other values stay valid (upper bounds)."""
+
+    def __init__(self, ctx: _Ctx, F: np.ndarray, h: HausdorffResult):
+        ab, ba = h.a_to_b, h.b_to_a
+        self.ctx = ctx
+        self.PA = ab.all_points
+        self.dA = ab.all_dists.copy()
+        self.nA = ab.all_nearest.copy()
+        self.ba = np.zeros(len(F))
+        if ba.tri_max is not None:
+            self.ba[:len(ba.tri_max)] = ba.tri_max
+        self.spacing = ba.spacing
+
+    def values(self) -> np.ndarray:
+        val = self.ba.copy()
+        ok = self.nA >= 0
+        np.maximum.at(val, self.nA[ok], self.dA[ok])
+        return val
+
+    def update(self, V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> None:
+        if len(changed) == 0:
+            return
+        g = surface_grid(V, F[changed], 0, spacing=self.spacing)
+        d = directed(self.ctx.index_a, g, seeds=min(SEEDS, max(4, len(changed))), rounds=ROUNDS)
+        tm = np.zeros(len(changed))
+        if d.tri_max is not None:
+            tm[:len(d.tri_max)] = d.tri_max
+        self.ba[changed] = tm
+        hit = np.zeros(len(F), bool)
+        hit[changed] = True
+        sel = np.flatnonzero(hit[np.maximum(self.nA, 0)] & (self.nA >= 0))
+        if len(sel):
+            self.dA[sel], self.nA[sel] = SurfaceIndex(V, F).distance(self.PA[sel])
 
 
 def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffResult, list[dict]]:
     """``refine_rounds`` rounds of local repair where the error peaks (module docstring, step 3).
-    Each round: turn edges of the peak triangles where that lowers the local error, move their
-    free corners to lower the local maximum, put back any corner that turned a triangle against
-    the input, and measure again; a round that does not lower the measured maximum is undone
-    and ends the refinement."""
+    Each round takes the triangles whose error is within _PEAK_SHARE of the largest (as the
+    measure saw it, kept up to date by a _Tracker), turns their edges where that lowers the
+    local error, moves their free corners to lower the local maximum and puts back any corner
+    that turned a triangle against the input. What a round changed is measured again; corners
+    around a triangle whose error rose above the round's starting maximum are put back (and the
+    round's edge turns undone). The result is measured once at the end and kept only if its
+    maximum is lower."""
     log: list[dict] = []
     cfg = ctx.cfg
+    if cfg.refine_rounds <= 0 or len(out.F) == 0 or h.a_to_b is None or h.a_to_b.all_points is None:
+        return out, h, log
+    t = time.perf_counter()
+    V, F = out.V.copy(), out.F.copy()
+    tri_uvs = None if out.tri_uvs is None else out.tri_uvs.copy()
+    le = _local_error(ctx, V, F, spacing=h.b_to_a.spacing)
+    tracker = _Tracker(ctx, F, h)
+    fr = out.flip
     for _ in range(cfg.refine_rounds):
-        t = time.perf_counter()
-        tris = _peak_triangles(out, h, ctx.scale)
-        if len(tris) == 0:
+        val = tracker.values()
+        mx = float(val.max())
+        if mx <= 0:
             break
-        V, F = out.V.copy(), out.F.copy()
-        tri_uvs = None if out.tri_uvs is None else out.tri_uvs.copy()
-        le = _local_error(ctx, V, F)
+        hot = np.flatnonzero(val >= _PEAK_SHARE * mx)
+        hot = hot[np.argsort(-val[hot], kind="stable")[:_PEAKS]]
+        F0, V0, uv0, fr0, a0 = F.copy(), V.copy(), None if tri_uvs is None else tri_uvs.copy(), fr, le.a_tri.copy()
         turned = 0
         if out.src_tri is None:
-            turned = repair.flip_edges(V, F, out.region, tri_uvs, None, le, candidates=tris)
-        fr = _flip_check(ctx, V, F, out.flip) if turned else out.flip
-        V_before = V.copy()
-        verts = np.unique(F[tris].ravel())
-        moved, _ = repair.polish(V, F, out.fixed, le, verts, ref=fr.ref if fr is not None else None)
+            turned = repair.flip_edges(V, F, out.region, tri_uvs, None, le, candidates=hot)
+            if turned:
+                fr = _flip_check(ctx, V, F, fr)
         info: dict = {}
-        ff = fr
+        V_mid = V.copy()
+        moved, _ = repair.polish(V, F, out.fixed, le, np.unique(F[hot].ravel()), ref=fr.ref)
         if moved:
-            V, ff, _ = _no_new_flips(ctx, V_before, V, F, fr, info)
-        rec = {"peak_triangles": int(len(tris)), "edges_turned": int(turned), "vertices_moved": int(moved),
-               "reverted_vertices": int(info.get("reverted_vertices", 0))}
-        repair_s = time.perf_counter() - t
-        if not (turned or moved) or int(ff.flipped.sum()) > int(out.flipped.sum()):
-            rec["kept"] = False
-            log.append(rec)
+            V, fr, _ = _no_new_flips(ctx, V_mid, V, F, fr, info)
+        entry = {"peak_triangles": int(len(hot)), "edges_turned": int(turned), "vertices_moved": int(moved),
+                 "reverted_vertices": int(info.get("reverted_vertices", 0)), "largest_error_before": mx / ctx.scale}
+        log.append(entry)
+        changed = np.flatnonzero((F != F0).any(axis=1) | (V[F] != V0[F]).any(axis=(1, 2)))
+        if len(changed) == 0:
             break
-        o2 = replace(out, V=V, F=F, tri_uvs=tri_uvs, flipped=ff.flipped, flip=ff, h=None,
-                     new_nonmanifold=_new_nonmanifold_triangles(ctx.prep, F, out.src_vertex) if turned
-                     else out.new_nonmanifold, repair_seconds=out.repair_seconds + repair_s)
-        h2 = _measure(ctx, o2)
-        rec["hausdorff_max"] = float(h2.max / ctx.scale)
-        rec["kept"] = bool(h2.max < h.max and _defects(o2) <= _defects(out))
-        log.append(rec)
-        if not rec["kept"]:
+        tracker.update(V, F, changed)
+        _reassign(le, V, F, changed)
+        val = tracker.values()
+        worse = changed[val[changed] > mx]
+        put_back = 0
+        for _ in range(4):
+            worse = changed[val[changed] > mx]
+            if len(worse) == 0:
+                break
+            # corners around a triangle that got worse than the round's starting maximum go back
+            # (and if it was turned, every turn of the round is undone)
+            back = np.unique(F[worse].ravel())
+            redo = np.zeros(0, np.int64)
+            if (F[worse] != F0[worse]).any():
+                redo = np.flatnonzero((F != F0).any(axis=1))
+                F[redo] = F0[redo]
+                if tri_uvs is not None:
+                    tri_uvs[redo] = uv0[redo]
+                back = np.unique(np.concatenate([back, F[redo].ravel()]))
+            back = back[(V[back] != V0[back]).any(axis=1)]
+            V[back] = V0[back]
+            put_back += len(back)
+            hit = np.zeros(len(V), bool)
+            hit[back] = True
+            again = np.union1d(np.flatnonzero(hit[F].any(axis=1)), redo)
+            fr = _flip_check(ctx, V, F, fr)
+            tracker.update(V, F, again)
+            _reassign(le, V, F, again)
+            val = tracker.values()
+        if put_back:
+            entry["put_back_vertices"] = int(put_back)
+        if (val[changed] > mx).any():
+            F[:], V[:] = F0, V0
+            if tri_uvs is not None:
+                tri_uvs[:] = uv0
+            le.set_assignment(a0, len(F))
+            fr = fr0
+            tracker.update(V, F, changed)
+            entry["undone"] = True
+            entry["largest_error_after"] = float(val.max()) / ctx.scale
             break
-        out, h = o2, h2
-    return out, h, log
+        entry["largest_error_after"] = float(val.max()) / ctx.scale
+        if val.max() >= mx:
+            break
+    repair_s = time.perf_counter() - t
+    if np.array_equal(V, out.V) and np.array_equal(F, out.F):
+        return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
+    o2 = replace(out, V=V, F=F, tri_uvs=tri_uvs, flipped=fr.flipped, flip=fr, h=None, folded=_new_folds(ctx, V, F),
+                 new_nonmanifold=_new_nonmanifold_triangles(ctx.prep, F, out.src_vertex),
+                 repair_seconds=out.repair_seconds + repair_s)
+    h2 = _measure(ctx, o2)
+    keep = bool(h2.max < h.max and _defects(o2) <= _defects(out))
+    log.append({"hausdorff_max": float(h2.max / ctx.scale), "kept": keep})
+    if keep:
+        return o2, h2, log
+    return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
+
+
+def _reassign(le: repair.LocalError, V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> None:
+    """The input points that stood for a changed triangle: their closest triangle again."""
+    pts, _ = le.points_of(changed)
+    if len(pts):
+        _, near = SurfaceIndex(V, F).distance(le.P[pts])
+        le.a_tri[pts] = near
+        le.set_assignment(le.a_tri, len(F))
 
 
 def _edge_flip_repair(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.ndarray | None,
@@ -823,7 +925,8 @@ def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.nd
 
 
 def _defects(out: _Out) -> int:
-    return int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
+    return int(out.flipped.sum()) + int(out.new_nonmanifold.sum()) + \
+        (int(out.folded.sum()) if out.folded is not None else 0)
 
 
 def _lock_under(prep: _Prepared, out: _Out, index_a: SurfaceIndex, lock: np.ndarray) -> np.ndarray:
@@ -832,7 +935,10 @@ def _lock_under(prep: _Prepared, out: _Out, index_a: SurfaceIndex, lock: np.ndar
     nor locked: a corner of the input triangles within its bounding sphere whose centroid is
     closest to it (or of any within the sphere, if none is)."""
     add = np.zeros(len(prep.V), bool)
-    bad = np.flatnonzero(out.flipped | out.new_nonmanifold)
+    bad = out.flipped | out.new_nonmanifold
+    if out.folded is not None:
+        bad = bad | out.folded
+    bad = np.flatnonzero(bad)
     if len(bad) == 0:
         return add
     cen, rad = bounding_spheres(out.V[out.F[bad]])
@@ -1003,8 +1109,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         we, wc, _ = edge_counts(Fw)
         seams = w_vertex[we[wc == 1]]
         chains, chain_ends = repair.border_chains(prep.F, seams)
+    folds_in = repair.folds(prep.V, prep.F)
     ctx = _Ctx(prep=prep, cfg=cfg, method=method, index_a=index_a, grid_a=grid_a, scale=scale, protect=protect,
-               chains=chains, chain_ends=chain_ends)
+               chains=chains, chain_ends=chain_ends,
+               fold_zones=prep.V[prep.F[np.unique(folds_in.ravel())]].mean(axis=1) if len(folds_in) else None)
     prep_s = time.perf_counter() - t_prep
 
     cap = float(cfg.error_ceiling) * scale if kind == "triangles" else 0.0
@@ -1041,6 +1149,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             lock |= add
             ctx.repair_log.append({"target": int(target), "round": rnd + 1, "flipped": int(out.flipped.sum()),
                                    "on_new_nonmanifold_edges": int(out.new_nonmanifold.sum()),
+                                   "folded": int(out.folded.sum()) if out.folded is not None else 0,
                                    "locked_vertices": int(lock.sum())})
         return best
 
@@ -1077,7 +1186,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             # fewer triangles cost flips, non-manifold edges or more than the ceiling: find the
             # smallest count above the target that does not
             why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
-                   f"non-manifold edges" if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
+                   f"non-manifold edges, {int(out.folded.sum()) if out.folded is not None else 0} in folds"
+                   if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
             n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
                 rec.warn(f"{target} triangles would cost {why} (error_ceiling = {cfg.error_ceiling}); "
@@ -1100,7 +1210,6 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     topo_in = topology(prep.F)
     topo_out = topology(out.F)
     flips = out.flipped
-    folds_in = repair.folds(prep.V, prep.F)
     folds_out = repair.folds(out.V, out.F)
     out_edge_mask, out_region_edges = _region_edge_vertices(out.F, out.region, len(out.V))
     off_boundary = int((out_edge_mask & ~edge_mask[out.src_vertex]).sum())

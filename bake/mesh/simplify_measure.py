@@ -53,8 +53,8 @@ _MAX_LEVEL = 6
 # refinement levels below the grid (midpoints: positions stay exact fractions of 2**_KEY_LEVEL)
 _KEY_LEVEL = _MAX_LEVEL + 16
 # the points taken per refinement round, and the rounds
-SEEDS = 64
-ROUNDS = 10
+SEEDS = 256
+ROUNDS = 12
 # separate places where the distance peaks, kept for the stage's repairs
 PEAKS = 64
 
@@ -107,7 +107,8 @@ def _grid_spacing(longest: np.ndarray, n_vertices: int, points: int, max_level: 
     return hi
 
 
-def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MAX_LEVEL) -> SurfaceGrid:
+def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MAX_LEVEL,
+                 spacing: float | None = None) -> SurfaceGrid:
     """About ``points`` grid nodes over the mesh (every vertex among them); see the module
     docstring. Point keys: a vertex is its own id; an edge point is ``nV + edge * (M + 1) + q``
     for the point ``q / M`` of the way from the edge's lower-numbered end (``M = 2**_KEY_LEVEL``);
@@ -123,7 +124,7 @@ def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MA
     el = np.linalg.norm(C - C[:, [1, 2, 0]], axis=2)  # sides ab, bc, ca
     longest = el.max(axis=1)
     used = np.unique(F)
-    s = _grid_spacing(longest, len(used), points, max_level)
+    s = _grid_spacing(longest, len(used), points, max_level) if spacing is None else float(spacing)
     level = np.clip(np.ceil(np.log2(np.maximum(longest / max(s, 1e-300), 1.0))), 0, max_level).astype(np.int64)
     if not level.any():  # every triangle is smaller than the spacing: the grid is the vertices
         remap = np.zeros(nV, np.int64)
@@ -223,6 +224,13 @@ class Directed:
     peak_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     peak_dists: np.ndarray = field(default_factory=lambda: np.zeros(0))
     peak_tris: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    tri_max: np.ndarray | None = None  # (T,) the largest distance found on each triangle of X
+    # every point measured (grid and refinement): distances (upper bounds, the largest exact),
+    # the triangle of X it lies on, the closest triangle of Y found
+    all_points: np.ndarray | None = None
+    all_dists: np.ndarray | None = None
+    all_tris: np.ndarray | None = None
+    all_nearest: np.ndarray | None = None
 
 
 def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndarray:
@@ -242,7 +250,8 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
     return cand[first[:k]]
 
 
-def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS) -> Directed:
+def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
+             verify: bool = True) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring."""
     P = grid.P
@@ -253,17 +262,15 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     # area-weighted mean over the grid's cells
     w = grid.cell_area
     mean = float((w * d[grid.cells].mean(axis=1)).sum() / w.sum()) if w.sum() > 0 else float(d.mean())
-    pts = [P]
-    dist = [d]
-    tris = [grid.tri]
     cells, ctri = grid.cells, grid.cell_tri
     n_pts = len(P)
     mid_keys = np.zeros(0, np.int64)
     mid_ids = np.zeros(0, np.int64)
     apart = grid.spacing
-    allP, allD, allT = P, d, grid.tri
-    for _ in range(rounds):
-        top = _distinct_top(allP, allD, seeds, apart)
+    allP, allD, allT, allN = P, d, grid.tri, near
+    for r in range(rounds):
+        # many places for the first rounds, fewer (the best of them) for the deeper ones
+        top = _distinct_top(allP, allD, max(seeds >> (r // 2), min(seeds, 32)), apart)
         hot = np.zeros(n_pts, bool)
         hot[top] = True
         sel = np.flatnonzero(hot[cells].any(axis=1))
@@ -287,14 +294,12 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         # the triangle of X a midpoint lies in: that of a cell it was made for
         tn = np.empty(len(uk), np.int64)
         tn[inv] = np.tile(ctri[sel], 3)
-        dn, _ = index_y.distance(Pn)
-        pts.append(Pn)
-        dist.append(dn)
-        tris.append(tn[new])
+        dn, nn = index_y.distance(Pn)
         n_pts += len(new)
         allP = np.concatenate([allP, Pn])
         allD = np.concatenate([allD, dn])
         allT = np.concatenate([allT, tn[new]])
+        allN = np.concatenate([allN, nn])
         order = np.argsort(np.concatenate([mid_keys, uk[new]]), kind="stable")
         mid_keys = np.concatenate([mid_keys, uk[new]])[order]
         mid_ids = np.concatenate([mid_ids, ids[new]])[order]
@@ -307,13 +312,19 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         cells = np.concatenate([cells[keep], kids])
         ctri = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
     D = allD.copy()
-    tops, exact = _verify(allP, D, index_y)
+    if verify:
+        tops, exact = _verify(allP, D, index_y)
+    else:  # upper bounds (the repairs compare before and after with the same index)
+        tops, exact = np.argsort(-D, kind="stable")[:1], False
     i = int(tops[0])
     pk = _distinct_top(allP, D, PEAKS, 0.5 * grid.spacing)
+    tri_max = np.zeros(int(grid.cell_tri.max()) + 1 if len(grid.cell_tri) else 0)
+    np.maximum.at(tri_max, allT, D)
     return Directed(max=float(D[i]), mean=mean, worst=allP[i].copy(), worst_tri=int(allT[i]),
                     grid_points=len(P), refine_points=n_pts - len(P), exact=bool(exact),
                     top_points=allP[tops], top_dists=D[tops], top_tris=allT[tops], nearest=near[:len(P)],
-                    spacing=grid.spacing, peak_points=allP[pk], peak_dists=D[pk], peak_tris=allT[pk])
+                    spacing=grid.spacing, peak_points=allP[pk], peak_dists=D[pk], peak_tris=allT[pk],
+                    tri_max=tri_max, all_points=allP, all_dists=D, all_tris=allT, all_nearest=allN)
 
 
 @dataclass

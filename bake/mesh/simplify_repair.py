@@ -165,9 +165,13 @@ class LocalError:
     those triangles (``a_points`` with ``a_tri``: the triangle of B each is closest to) against
     them. Distances are the index's (upper bounds, exact unless its candidates miss)."""
 
-    def __init__(self, index_a: SurfaceIndex, a_points: np.ndarray, a_tri: np.ndarray, n_tri: int):
+    def __init__(self, index_a: SurfaceIndex, a_points: np.ndarray, a_tri: np.ndarray, n_tri: int,
+                 spacing: float = 0.0):
         self.ia = index_a
         self.P = np.asarray(a_points, np.float64)
+        # > 0: points on the triangles are a grid at this spacing, refined around the largest
+        # distances (simplify_measure.directed), not the fixed pattern
+        self.spacing = float(spacing)
         self.set_assignment(a_tri, n_tri)
 
     def set_assignment(self, a_tri: np.ndarray, n_tri: int) -> None:
@@ -192,15 +196,25 @@ class LocalError:
         return self.order[np.repeat(self.start[tris], cnt) + offs], rows
 
     def patches(self, C: np.ndarray, patch: np.ndarray, pts: np.ndarray, pts_patch: np.ndarray,
-                n_patch: int) -> np.ndarray:
+                n_patch: int, sample: np.ndarray | None = None) -> np.ndarray:
         """Local max per patch: triangles with corners ``C`` (m, 3, 3), each in patch
         ``patch[i]``; original points ``pts`` (ids) each in patch ``pts_patch[j]`` (measured
-        against every triangle of its patch)."""
+        against every triangle of its patch). Points on the triangles are measured against
+        the original only for the triangles ``sample`` (a mask; default all)."""
         out = np.zeros(n_patch)
         if len(C):
-            P = np.einsum("pk,mkd->mpd", _BARY, C).reshape(-1, 3)
+            own = np.arange(len(C)) if sample is None else np.flatnonzero(sample)
+            P = np.einsum("pk,mkd->mpd", _BARY, C[own]).reshape(-1, 3)
             d, _ = self.ia.distance(P)
-            np.maximum.at(out, patch, d.reshape(len(C), -1).max(axis=1))
+            per = d.reshape(len(own), -1).max(axis=1)
+            if self.spacing > 0 and len(own):
+                from .simplify_measure import directed, surface_grid
+                g = surface_grid(C[own].reshape(-1, 3), np.arange(3 * len(own)).reshape(-1, 3), 0,
+                                 spacing=self.spacing)
+                dd = directed(self.ia, g, seeds=max(8, min(64, len(own))), rounds=8, verify=False)
+                per = np.maximum(per, dd.tri_max[:len(own)] if len(dd.tri_max) >= len(own) else
+                                 np.pad(dd.tri_max, (0, len(own) - len(dd.tri_max))))
+            np.maximum.at(out, patch[own], per)
         if len(pts) and len(C):
             # pairs (point, triangle of its patch)
             order = np.argsort(patch, kind="stable")
@@ -215,6 +229,50 @@ class LocalError:
             np.minimum.at(best, pr, d2)
             np.maximum.at(out, pts_patch, np.sqrt(np.where(np.isfinite(best), best, 0.0)))
         return out
+
+
+    def surface_normals(self, P: np.ndarray) -> np.ndarray:
+        """Unit normals of the original's triangles closest to the points ``P``."""
+        _, tri = self.ia.distance(P)
+        return self.ia.normals[:, np.maximum(tri, 0)].T * (tri >= 0)[:, None]
+
+    def triangles(self, V: np.ndarray, F: np.ndarray, tris: np.ndarray) -> np.ndarray:
+        """Local error of each triangle ``tris`` of (V, F): points on it against the original,
+        and the original's points that stand for it against it and the triangles across its
+        edges."""
+        tris = np.asarray(tris, np.int64)
+        if len(tris) == 0:
+            return np.zeros(0)
+        nbr = edge_neighbours(F)
+        nb = nbr[tris]  # (k, 3), -1 where open
+        rows = np.concatenate([np.arange(len(tris)), np.repeat(np.arange(len(tris)), 3)])
+        tt = np.concatenate([tris, nb.ravel()])
+        ok = tt >= 0
+        rows, tt = rows[ok], tt[ok]
+        sample = np.zeros(len(tt), bool)
+        sample[:len(tris)] = True  # the first len(tris) entries are the triangles themselves (all >= 0)
+        pts, prow = self.points_of(tris)
+        return self.patches(V[F[tt]], rows, pts, prow, len(tris), sample=sample)
+
+
+def edge_neighbours(F: np.ndarray) -> np.ndarray:
+    """(t, 3) the triangle across each side (k, k+1) of each triangle (-1: open or shared by
+    more than two)."""
+    a = F.ravel()
+    b = F[:, [1, 2, 0]].ravel()
+    n = int(F.max()) + 1 if len(F) else 1
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    same = ks[1:] == ks[:-1]
+    two = same.copy()
+    two[1:] &= ~same[:-1]
+    two[:-1] &= ~same[1:]
+    i = np.flatnonzero(two)
+    nbr = np.full(len(a), -1, np.int64)
+    nbr[order[i]] = order[i + 1] // 3
+    nbr[order[i + 1]] = order[i] // 3
+    return nbr.reshape(-1, 3)
 
 
 # --------------------------------------------------------------------------- edge flips
@@ -268,7 +326,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.nda
     idx = np.flatnonzero(pick)
     if len(idx) == 0:
         return 0
-    t, u, st, su = t[idx], u[idx], st[idx], su[idx]
+    t, u, st, su, dots = t[idx], u[idx], st[idx], su[idx], dots[idx]
     p = F[t, st]
     q = F[t, (st + 1) % 3]
     r = F[t, (st + 2) % 3]
@@ -294,10 +352,15 @@ def flip_edges(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.nda
     t2 = np.stack([d, q, r], axis=1)
     ref = N[t] + N[u]
     n1, n2 = _normals(V, t1), _normals(V, t2)
-    ok &= (np.einsum("ij,ij->i", n1, ref) > 0) & (np.einsum("ij,ij->i", n2, ref) > 0)
+    is_fold = dots < FOLD_DOT
+    ok &= is_fold | ((np.einsum("ij,ij->i", n1, ref) > 0) & (np.einsum("ij,ij->i", n2, ref) > 0))
+    # and with the original surface under them (a fold's own normals cancel: this decides)
+    r1, r2 = le.surface_normals(V[t1].mean(axis=1)), le.surface_normals(V[t2].mean(axis=1))
+    ok &= (np.einsum("ij,ij->i", n1, r1) > 0) & (np.einsum("ij,ij->i", n2, r2) > 0)
     idx = np.flatnonzero(ok)
     if len(idx) == 0:
         return 0
+    fold = is_fold[idx]
     t, u, st, su, p, q, r, d, t1, t2 = (x[idx] for x in (t, u, st, su, p, q, r, d, t1, t2))
     m = len(t)
     # local error before and after, both triangles together as one patch
@@ -308,13 +371,16 @@ def flip_edges(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.nda
     patch = np.concatenate([np.arange(m), np.arange(m)])
     e_old = le.patches(old_C, patch, pts, pp, m)
     e_new = le.patches(new_C, patch, pts, pp, m)
-    good = np.flatnonzero(e_new < gain * e_old)
+    # a fold is undone unless that costs more than 10% of the local error
+    good = np.flatnonzero((e_new < gain * e_old) | (fold & (e_new <= 1.1 * e_old)))
     if len(good) == 0:
         return 0
     good = good[np.argsort(e_new[good] - e_old[good], kind="stable")]  # biggest drop first
     touched = np.zeros(len(F), bool)
     turned = 0
     applied = []
+    F_old = F.copy()
+    uv_old = None if tri_uvs is None else tri_uvs.copy()
     for k in good.tolist():
         if touched[t[k]] or touched[u[k]]:
             continue
@@ -328,6 +394,24 @@ def flip_edges(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.nda
         F[u[k]] = t2[k]
         touched[t[k]] = touched[u[k]] = True
         turned += 1
+    if turned:
+        # a turn that makes a new fold with a neighbour is undone
+        before = {tuple(x) for x in folds(V, F_old).tolist()}
+        new = [x for x in folds(V, F).tolist() if tuple(x) not in before]
+        if new:
+            bad_tri = np.zeros(len(F), bool)
+            bad_tri[np.asarray(new).ravel()] = True
+            keep_k = []
+            for k in applied:
+                if bad_tri[t[k]] or bad_tri[u[k]]:
+                    F[t[k]], F[u[k]] = F_old[t[k]], F_old[u[k]]
+                    if tri_uvs is not None:
+                        tri_uvs[t[k]], tri_uvs[u[k]] = uv_old[t[k]], uv_old[u[k]]
+                    touched[t[k]] = touched[u[k]] = False
+                    turned -= 1
+                else:
+                    keep_k.append(k)
+            applied = keep_k
     if turned:
         # the original's points of a turned pair go to whichever new triangle is closer
         moved, rows = le.points_of(np.flatnonzero(touched))

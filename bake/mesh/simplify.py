@@ -87,7 +87,7 @@ from scipy.spatial import cKDTree
 from .simplify_error import (FlipResult, SurfaceIndex, bounding_spheres, edge_counts, flip_check, topology,
                              triangle_pattern)
 from .simplify_fit import refit
-from .simplify_measure import ROUNDS, SEEDS, HausdorffResult, directed, hausdorff, surface_grid
+from .simplify_measure import HausdorffResult, directed, hausdorff, surface_grid
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
@@ -102,6 +102,8 @@ _BORDER_TOLERANCE = 0.5
 _PEAK_SHARE = 0.8
 # ... at most this many separate places
 _PEAKS = 24
+# The least-squares fit pairs at most this many of the input's points with the result.
+_FIT_POINTS = 12000
 # Face colours with more distinct values than this are a colour signal, not flat regions.
 MAX_COLOR_REGIONS = 1024
 
@@ -440,6 +442,7 @@ class _Ctx:
     measures: int = 0
     measure_seconds: float = 0.0
     fold_zones: np.ndarray | None = None  # centroids of the input's own folded triangles
+    fit_points: np.ndarray | None = None  # the input's points the fit pairs with the result
 
 
 def _local_error(ctx: _Ctx, V: np.ndarray, F: np.ndarray, spacing: float = 0.0) -> repair.LocalError:
@@ -591,8 +594,8 @@ def _fit(ctx: _Ctx, out: _Out) -> _Out:
     V, F, fr, fixed = out.V, out.F, out.flip, out.fixed
     info = dict(out.fit_info)
     t = time.perf_counter()
-    Vf, fit_info = refit(V, F, fixed, ctx.index_a, ctx.grid_a.P, iterations=cfg.fit_iterations,
-                         samples_b=min(cfg.error_samples, 8000), seed=cfg.seed)
+    Vf, fit_info = refit(V, F, fixed, ctx.index_a, ctx.fit_points, iterations=cfg.fit_iterations,
+                         samples_b=min(cfg.error_samples, 4000), seed=cfg.seed)
     info.update(fit_info)
     fit_s = time.perf_counter() - t
     t = time.perf_counter()
@@ -644,7 +647,7 @@ class _Tracker:
         if len(changed) == 0:
             return
         g = surface_grid(V, F[changed], 0, spacing=self.spacing)
-        d = directed(self.ctx.index_a, g, seeds=min(SEEDS, max(4, len(changed))), rounds=ROUNDS)
+        d = directed(self.ctx.index_a, g, seeds=max(8, min(64, 2 * len(changed))), rounds=8, verify=False)
         tm = np.zeros(len(changed))
         if d.tri_max is not None:
             tm[:len(d.tri_max)] = d.tri_max
@@ -688,9 +691,11 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
             turned = repair.flip_edges(V, F, out.region, tri_uvs, None, le, candidates=hot)
             if turned:
                 fr = _flip_check(ctx, V, F, fr)
+                tracker.update(V, F, np.flatnonzero((F != F0).any(axis=1)))
         info: dict = {}
         V_mid = V.copy()
-        moved, _ = repair.polish(V, F, out.fixed, le, np.unique(F[hot].ravel()), ref=fr.ref)
+        moved, _ = repair.polish(V, F, out.fixed, le, np.unique(F[hot].ravel()), ref=fr.ref,
+                                 tri_error=tracker.values())
         if moved:
             V, fr, _ = _no_new_flips(ctx, V_mid, V, F, fr, info)
         entry = {"peak_triangles": int(len(hot)), "edges_turned": int(turned), "vertices_moved": int(moved),
@@ -1090,7 +1095,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         return scene, rec
 
     t_prep = time.perf_counter()
-    index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed, scale=scale)
+    index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed, scale=scale, corners=False, k=8)
     grid_a = surface_grid(prep.V, prep.F, cfg.error_samples)
     # vertices the fit and the repairs leave alone: material edges, non-manifold edges and (with
     # preserve_border) open borders
@@ -1113,6 +1118,9 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     ctx = _Ctx(prep=prep, cfg=cfg, method=method, index_a=index_a, grid_a=grid_a, scale=scale, protect=protect,
                chains=chains, chain_ends=chain_ends,
                fold_zones=prep.V[prep.F[np.unique(folds_in.ravel())]].mean(axis=1) if len(folds_in) else None)
+    # the fit pairs at most _FIT_POINTS of the input's grid points (a fixed, even subset)
+    ctx.fit_points = grid_a.P if len(grid_a.P) <= _FIT_POINTS else \
+        grid_a.P[np.sort(np.random.default_rng(cfg.seed + 3).choice(len(grid_a.P), _FIT_POINTS, replace=False))]
     prep_s = time.perf_counter() - t_prep
 
     cap = float(cfg.error_ceiling) * scale if kind == "triangles" else 0.0
@@ -1156,19 +1164,12 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     measuring = cfg.measure_error or kind == "error"
 
     def fitted(out: _Out) -> tuple[_Out, HausdorffResult | None]:
-        """The fit, kept only if the measured maximum does not grow (measure_error), and the
-        measure of what is kept."""
+        """The fit (kept unless it turns triangles against the input or into folds), and the
+        measure of the result."""
         if cfg.fit_iterations <= 0:
             return out, (_measure(ctx, out) if measuring else None)
         o1 = _fit(ctx, out)
-        if not measuring or o1 is out:
-            return o1, (_measure(ctx, o1) if measuring else None)
-        h0 = _measure(ctx, out)
-        h1 = _measure(ctx, o1)
-        keep = h1.max <= h0.max
-        o1.fit_info["kept"] = bool(keep)
-        out.fit_info = dict(o1.fit_info)
-        return (o1, h1) if keep else (replace(out, fit_seconds=o1.fit_seconds), h0)
+        return o1, (_measure(ctx, o1) if measuring else None)
 
     def whole(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS):
         return fitted(attempt(target, lock0, rounds))

@@ -245,7 +245,7 @@ class SurfaceIndex:
     """Closest-triangle queries against one triangle mesh."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray, *, density: int = 50_000, k: int = 4, seed: int = 0,
-                 scale: float | None = None):
+                 scale: float | None = None, corners: bool = True):
         self.V = np.asarray(V, np.float64)
         self.F = np.asarray(F, np.int64).reshape(-1, 3)
         self.k = k
@@ -256,14 +256,15 @@ class SurfaceIndex:
         if T == 0:
             self.tree = None
             return
-        rng = np.random.default_rng(seed)
         tri_pts = self.V[self.F]
         self.table = _tri_table(tri_pts[:, 0], tri_pts[:, 1], tri_pts[:, 2])
-        used = self.V[np.unique(self.F)]
-        self.scale = float(np.linalg.norm(used.max(0) - used.min(0))) if scale is None else float(scale)
+        if scale is None:
+            used = self.V[np.unique(self.F)]
+            scale = float(np.linalg.norm(used.max(0) - used.min(0)))
+        self.scale = float(scale)
         cent, self.radii = bounding_spheres(tri_pts)
         parts, owners = [cent], [np.arange(T)]
-        if T <= 250_000:
+        if corners and T <= 250_000:
             # points near each corner (inside the triangle, so each belongs to one owner)
             near = 0.9 * tri_pts + 0.1 * cent[:, None, :]
             parts.append(near.reshape(-1, 3))
@@ -271,17 +272,18 @@ class SurfaceIndex:
         # extra area-weighted points: up to ``density`` in all, at most ~64 per triangle
         # (but 8192 in all for small meshes)
         extra = max(0, min(density, max(64 * T, 8192)) - sum(len(p) for p in parts))
-        rp, rt, _ = sample_surface(self.V, self.F, extra, rng)
-        parts.append(rp)
-        owners.append(rt)
-        pts = np.concatenate(parts)
+        if extra:
+            rp, rt, _ = sample_surface(self.V, self.F, extra, np.random.default_rng(seed))
+            parts.append(rp)
+            owners.append(rt)
+        pts = np.concatenate(parts) if len(parts) > 1 else cent
         self._lo = pts.min(axis=0)
         self._span = float(max((pts.max(axis=0) - self._lo).max(), 1e-300))
         # tree points and (in _candidates) query points in Z-order: queries that follow each
         # other walk the same nodes, which halves the KD-tree time
         order = np.argsort(_morton(pts, self._lo, self._span))
         self.points = pts[order]
-        self.owner = np.concatenate(owners)[order]
+        self.owner = np.concatenate(owners)[order] if len(owners) > 1 else order
         self.tree = cKDTree(self.points, balanced_tree=False, compact_nodes=False)
         self.centers = cent
         self.area = 0.5 * np.linalg.norm(np.cross(tri_pts[:, 1] - tri_pts[:, 0], tri_pts[:, 2] - tri_pts[:, 0]),

@@ -268,9 +268,10 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     mid_ids = np.zeros(0, np.int64)
     apart = grid.spacing
     allP, allD, allT, allN = P, d, grid.tri, near
+    pool = np.arange(len(P))  # where the next seeds are looked for: the last seeds and new points
     for r in range(rounds):
         # many places for the first rounds, fewer (the best of them) for the deeper ones
-        top = _distinct_top(allP, allD, max(seeds >> (r // 2), min(seeds, 32)), apart)
+        top = pool[_distinct_top(allP[pool], allD[pool], max(seeds >> (r // 2), min(seeds, 32)), apart)]
         hot = np.zeros(n_pts, bool)
         hot[top] = True
         sel = np.flatnonzero(hot[cells].any(axis=1))
@@ -300,6 +301,7 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         allD = np.concatenate([allD, dn])
         allT = np.concatenate([allT, tn[new]])
         allN = np.concatenate([allN, nn])
+        pool = np.concatenate([top, n_pts - len(new) + np.arange(len(new))])
         order = np.argsort(np.concatenate([mid_keys, uk[new]]), kind="stable")
         mid_keys = np.concatenate([mid_keys, uk[new]])[order]
         mid_ids = np.concatenate([mid_ids, ids[new]])[order]

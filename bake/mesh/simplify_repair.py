@@ -211,7 +211,7 @@ class LocalError:
                 from .simplify_measure import directed, surface_grid
                 g = surface_grid(C[own].reshape(-1, 3), np.arange(3 * len(own)).reshape(-1, 3), 0,
                                  spacing=self.spacing)
-                dd = directed(self.ia, g, seeds=max(8, min(64, len(own))), rounds=8, verify=False)
+                dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False)
                 per = np.maximum(per, dd.tri_max[:len(own)] if len(dd.tri_max) >= len(own) else
                                  np.pad(dd.tri_max, (0, len(own) - len(dd.tri_max))))
             np.maximum.at(out, patch[own], per)
@@ -441,12 +441,15 @@ def _ring(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def polish(V: np.ndarray, F: np.ndarray, fixed: np.ndarray, le: LocalError, verts: np.ndarray,
-           iterations: int = 25, passes: int = 2, ref: np.ndarray | None = None) -> tuple[int, float]:
+           iterations: int = 25, passes: int = 1, ref: np.ndarray | None = None,
+           tri_error: np.ndarray | None = None) -> tuple[int, float]:
     """Move the vertices ``verts`` (in place in ``V``) to lower the local maximum error around
     each (see the module docstring). Vertices sharing a triangle are moved in different
     batches. A move keeps every triangle around the vertex facing the way it did and, where
-    ``ref`` (t, 3) gives the normal of the original under a triangle, facing with it. Returns
-    (vertices moved, largest local max left among them)."""
+    ``ref`` (t, 3) gives the normal of the original under a triangle, facing with it. A move is
+    kept if the local maximum around the vertex drops below what it was (``tri_error``: each
+    triangle's error as known; else measured here). Returns (vertices moved, largest local max
+    left among them)."""
     verts = np.asarray(verts, np.int64)
     verts = verts[~fixed[verts]]
     if len(verts) == 0 or len(F) == 0:
@@ -468,7 +471,8 @@ def polish(V: np.ndarray, F: np.ndarray, fixed: np.ndarray, le: LocalError, vert
                 else:
                     taken_tri[ring] = True
                     batch.append(v)
-            m, w = _polish_batch(V, F, np.asarray(batch, np.int64), corner_order, start, le, iterations, ref)
+            m, w = _polish_batch(V, F, np.asarray(batch, np.int64), corner_order, start, le, iterations, ref,
+                                 tri_error)
             moved_total += m
             worst = max(worst, w)
             remaining = np.asarray(rest, np.int64)
@@ -476,7 +480,7 @@ def polish(V: np.ndarray, F: np.ndarray, fixed: np.ndarray, le: LocalError, vert
 
 
 def _polish_batch(V, F, batch, corner_order, start, le: LocalError, iterations: int,
-                  ref: np.ndarray | None) -> tuple[int, float]:
+                  ref: np.ndarray | None, tri_error: np.ndarray | None) -> tuple[int, float]:
     nb = len(batch)
     # each vertex's ring (triangle, the vertex's corner in it)
     cnt = start[batch + 1] - start[batch]
@@ -486,7 +490,11 @@ def _polish_batch(V, F, batch, corner_order, start, le: LocalError, iterations: 
     rt, rk = corners // 3, corners % 3
     x0 = V[batch].copy()
     C0 = V[F[rt]]
-    e_before = le.patches(C0, rv, *_patch_points(le, rt, rv), nb)
+    if tri_error is not None:
+        e_before = np.zeros(nb)
+        np.maximum.at(e_before, rv, tri_error[rt])
+    else:
+        e_before = le.patches(C0, rv, *_patch_points(le, rt, rv), nb)
     # residual rows: b->a points of the ring triangles, a->b points standing for them
     nbary = len(_BARY)
     s_tri = np.repeat(np.arange(len(rt)), nbary)

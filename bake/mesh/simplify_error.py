@@ -70,6 +70,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..interrupt import deferred_interrupt
+
 __all__ = ["SurfaceIndex", "sample_surface", "point_triangle_distance", "hausdorff", "HausdorffResult",
            "triangle_normals", "triangle_areas", "topology", "edge_counts", "flip_check", "FlipResult",
            "reliable_normals", "triangle_pattern", "bounding_spheres"]
@@ -228,6 +230,16 @@ def point_triangle_distance(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.n
 
 
 # --------------------------------------------------------------------------- closest-triangle index
+def _kd_query(tree: cKDTree, P: np.ndarray, threaded: bool, **kw):
+    """``tree.query`` on one thread, or on all cores for big queries. scipy runs those on
+    Python threads it joins; Ctrl-C is held back until they are done (bake/interrupt.py), so an
+    interrupt never frees arrays the workers are still writing."""
+    if not threaded:
+        return tree.query(P, workers=1, **kw)
+    with deferred_interrupt():
+        return tree.query(P, workers=-1, **kw)
+
+
 def _spread10(x: np.ndarray) -> np.ndarray:
     x = (x | (x << 16)) & 0x030000FF
     x = (x | (x << 8)) & 0x0300F00F
@@ -320,7 +332,7 @@ class SurfaceIndex:
             return cand, d2.reshape(m, T)
         k = int(min(self.k, len(self.points)))
         z = np.argsort(_morton(P, self._lo, self._span))
-        _, nb = self.tree.query(P[z], k=k, workers=-1 if m >= _THREADED else 1)
+        _, nb = _kd_query(self.tree, P[z], m >= _THREADED, k=k)
         cand = np.empty((m, k), np.int64)
         cand[z] = self.owner[nb.reshape(m, k)]
         cand.sort(axis=1)
@@ -439,8 +451,8 @@ class SurfaceIndex:
                 break
             K = min(K, len(small))
             rt = reach[todo]
-            dd, ii = ctree.query(P[todo], k=K, distance_upper_bound=float(rt.max()) * (1 + 1e-12),
-                                 workers=-1 if len(todo) >= _THREADED else 1)
+            dd, ii = _kd_query(ctree, P[todo], len(todo) >= _THREADED, k=K,
+                               distance_upper_bound=float(rt.max()) * (1 + 1e-12))
             dd, ii = dd.reshape(len(todo), K), ii.reshape(len(todo), K)
             within = dd <= rt[:, None]
             full = within[:, -1] & (K < len(small))

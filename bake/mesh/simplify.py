@@ -535,6 +535,17 @@ def _finish(ctx: _Ctx, raw: _Raw) -> _Out:
                 edge_turns=turns, folded=folded)
 
 
+def _identity(ctx: _Ctx) -> _Out:
+    """The input itself as a result (what backing off to the input's count gives)."""
+    prep = ctx.prep
+    T = len(prep.F)
+    z = np.zeros(T, bool)
+    return _Out(V=prep.V, F=prep.F, src_vertex=np.arange(len(prep.V)), region=prep.region, src_tri=np.arange(T),
+                tri_uvs=None if prep.tri_uvs is None else prep.tri_uvs, fixed=np.ones(len(prep.V), bool),
+                lib_seconds=0.0, fit_seconds=0.0, fit_info={"rounds": 0}, notes=[], flipped=z,
+                new_nonmanifold=z.copy(), folded=z.copy())
+
+
 def _flip_check(ctx: _Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
     """The stage's flip check: only triangles not judged before (in ``prev``, else in the stage's
     last check) are measured; the result becomes the stage's last check."""
@@ -755,7 +766,7 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
                  new_nonmanifold=_new_nonmanifold_triangles(ctx.prep, F, out.src_vertex),
                  repair_seconds=out.repair_seconds + repair_s)
     h2 = _measure(ctx, o2)
-    keep = bool(h2.max < h.max and _defects(o2) <= _defects(out))
+    keep = bool(h2.max < h.max and _flaws(o2) <= _flaws(out))
     log.append({"hausdorff_max": float(h2.max / ctx.scale), "kept": keep})
     if keep:
         return o2, h2, log
@@ -930,8 +941,16 @@ def _new_nonmanifold_triangles(prep: _Prepared, F: np.ndarray, src_vertex: np.nd
 
 
 def _defects(out: _Out) -> int:
-    return int(out.flipped.sum()) + int(out.new_nonmanifold.sum()) + \
-        (int(out.folded.sum()) if out.folded is not None else 0)
+    """Flipped triangles and triangles on new non-manifold edges: a result with any is not
+    accepted (the stage backs off to more triangles)."""
+    return int(out.flipped.sum()) + int(out.new_nonmanifold.sum())
+
+
+def _flaws(out: _Out) -> int:
+    """Defects and triangles in new folds: what the lock-and-retry rounds try to remove (a fold
+    left over is reported, not a reason to back off: at strong reductions of thin parts a few
+    are the price of the budget)."""
+    return _defects(out) + (int(out.folded.sum()) if out.folded is not None else 0)
 
 
 def _lock_under(prep: _Prepared, out: _Out, index_a: SurfaceIndex, lock: np.ndarray) -> np.ndarray:
@@ -1137,8 +1156,19 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             lib_s += raw0.lib_seconds
             tol = _BORDER_TOLERANCE * raw0.lib_error
             blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V))
+            # the locks may take at most a quarter of the target's vertices (about target / 2):
+            # past that the tolerance grows, so the target stays reachable
+            budget = max(8, target // 8)
+            for _ in range(12):
+                if int(blk.sum()) <= budget or tol <= 0:
+                    break
+                tol *= 1.5
+                blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V))
             border_log.update({"tolerance": tol / scale, "locked_vertices": int(blk.sum()),
                                "chain_vertices": int(sum(len(c) for c in ctx.chains))})
+            if int(blk.sum()) > budget:  # chain ends alone are too many (soups, many small seams)
+                blk[:] = False
+                border_log.update({"locked_vertices": 0, "skipped": f"the chains need more than {budget} locks"})
             lock |= blk
         best = None
         for rnd in range(rounds + 1):
@@ -1146,8 +1176,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             raw.lib_seconds += lib_s
             lib_s = 0.0
             out = _finish(ctx, raw)
-            n_flip = _defects(out)
-            if best is None or n_flip < _defects(best):
+            n_flip = _flaws(out)
+            if best is None or n_flip < _flaws(best):
                 best = out
             if n_flip == 0 or rnd == rounds:
                 break
@@ -1172,6 +1202,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         return o1, (_measure(ctx, o1) if measuring else None)
 
     def whole(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS):
+        if target >= T0:  # backing off all the way: the input as it is
+            return _identity(ctx), HausdorffResult(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, np.zeros(3), 0, 0)
         return fitted(attempt(target, lock0, rounds))
 
     probes: list[dict] = []
@@ -1187,8 +1219,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             # fewer triangles cost flips, non-manifold edges or more than the ceiling: find the
             # smallest count above the target that does not
             why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
-                   f"non-manifold edges, {int(out.folded.sum()) if out.folded is not None else 0} in folds"
-                   if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
+                   f"non-manifold edges" if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
             n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
                 rec.warn(f"{target} triangles would cost {why} (error_ceiling = {cfg.error_ceiling}); "
@@ -1277,7 +1308,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     rec.accuracy.update({"flipped_triangles": int(flips.sum()), "folds": int(len(folds_out)),
                          "new_nonmanifold_edges": new_nm, "new_misoriented_edges": new_mis})
     sample = None
-    if h is not None:
+    if h is not None and h.a_to_b is not None:
         sample = {"original_grid_points": int(h.a_to_b.grid_points), "simplified_grid_points": int(h.b_to_a.grid_points),
                   "refinement_points": int(h.refine_points),
                   "original_spacing": float(h.a_to_b.spacing / scale), "simplified_spacing": float(h.b_to_a.spacing / scale),
@@ -1298,7 +1329,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "edges_turned_at_sharp_angles": int(out.edge_turns),
         "fit": out.fit_info,
         "refine": refine_log,
-        "error_samples": int(cfg.error_samples) if h is not None else 0,
+        "error_samples": int(cfg.error_samples) if sample is not None else 0,
         "error_sample": sample,
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
                         "inside every triangle), refined 8 times around the 24 largest distances, the largest "

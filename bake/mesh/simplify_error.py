@@ -88,6 +88,9 @@ _THREADED = 4096
 # under 3,000; a soup of large intersecting triangles, whose candidate bounds are loose, needs
 # millions: past this budget the max is reported as the largest bound left, an upper bound)
 _VERIFY_PAIRS = 1_500_000
+# meshes of at most this many triangles are verified by testing every (point, triangle) pair's
+# bounding-sphere bound (vectorised) instead of ball queries
+_EXACT_BRUTE = 20_000
 # a triangle whose double area is below this fraction of the squared bbox diagonal (or whose
 # largest angle has a sine below _SLIVER_SINE) has no reliable normal
 _AREA_TOL = 1e-12
@@ -499,6 +502,29 @@ class SurfaceIndex:
         dist = np.asarray(upper, np.float64).copy()
         tri = np.full(len(P), -1, np.int64)
         if self.tree is None or len(P) == 0:
+            return dist, tri
+        T = len(self.F)
+        if T <= _EXACT_BRUTE:
+            # few triangles: test every (point, triangle) pair's bounding-sphere bound and
+            # measure the pairs it cannot rule out (no ball queries: big triangles of CAD-like
+            # meshes make those slow)
+            step = max(1, (1 << 20) // T)
+            for s0 in range(0, len(P), step):
+                p = P[s0:s0 + step]
+                lb = np.linalg.norm(p[:, None, :] - self.centers[None], axis=2) - self.radii[None]
+                r, t = np.nonzero(lb <= dist[s0:s0 + step, None] * (1 + 1e-12) + 1e-300)
+                if stats is not None:
+                    stats["pairs"] = stats.get("pairs", 0) + len(r)
+                if len(r) == 0:
+                    continue
+                d = np.sqrt(_pair_dist2(p[r], np.take(self.table, t, axis=1)))
+                order = np.lexsort((t, d, r))
+                r, t, d = r[order], t[order], d[order]
+                first = np.r_[True, r[1:] != r[:-1]]
+                r, t, d = r[first] + s0, t[first], d[first]
+                upd = (d < dist[r]) | ((d == dist[r]) & ((tri[r] < 0) | (t < tri[r])))
+                dist[r[upd]] = d[upd]
+                tri[r[upd]] = t[upd]
             return dist, tri
         for i0, rows, tris in self.near_chunks(P, dist.copy()):
             if stats is not None:

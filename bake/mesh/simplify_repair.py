@@ -149,11 +149,12 @@ def _douglas_peucker(P: np.ndarray, tol: float, closed: bool) -> np.ndarray:
 
 def border_locks(V: np.ndarray, chains: list[np.ndarray], ends: np.ndarray, tol: float, n: int) -> np.ndarray:
     """(n,) vertices to lock so each chain, simplified to them, stays within ``tol`` of itself:
-    every chain end plus what Douglas-Peucker keeps (chains of at most 3 vertices: all)."""
+    what Douglas-Peucker keeps (an open chain's two ends always; chains of at most 3 vertices:
+    all). ``ends`` (where chains meet) are kept by the library as it is."""
     lock = np.zeros(n, bool)
-    lock[ends] = True
+    ends_set = set(np.asarray(ends).tolist())
     for c in chains:
-        closed = len(c) > 1 and not (lock[c[0]] and lock[c[-1]] and c[0] != c[-1])
+        closed = len(c) > 2 and c[0] not in ends_set and c[-1] not in ends_set
         lock[c[_douglas_peucker(V[c], tol, closed)]] = True
     return lock
 

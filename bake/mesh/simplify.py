@@ -102,8 +102,9 @@ _BORDER_TOLERANCE = 0.5
 _PEAK_SHARE = 0.8
 # ... at most this many separate places
 _PEAKS = 24
-# The least-squares fit pairs at most this many of the input's points with the result.
-_FIT_POINTS = 12000
+# The least-squares fit pairs at most this many of the input's points with the result (and a
+# third as many random points of the result with the input).
+_FIT_POINTS = 60000
 # Face colours with more distinct values than this are a colour signal, not flat regions.
 MAX_COLOR_REGIONS = 1024
 
@@ -574,9 +575,9 @@ def _new_folds(ctx: _Ctx, V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 def _no_new_flips(ctx: _Ctx, V0: np.ndarray, Vn: np.ndarray, F: np.ndarray, fr: FlipResult,
                   info: dict) -> tuple[np.ndarray, FlipResult, bool]:
-    """Put back the corners of any triangle a move (V0 -> Vn) turned against the input (a few
-    rounds, only the triangles that moved are checked). Returns (positions, flip result, whether
-    no new flip is left)."""
+    """Put back the corners of any triangle a move (V0 -> Vn) turned against the input or into a
+    fold (a few rounds, only the triangles that moved are checked). Returns (positions, flip
+    result, whether no new flip or fold is left)."""
     Vn = Vn.copy()
     ff = fr
     folded0 = _new_folds(ctx, V0, F)
@@ -606,7 +607,7 @@ def _fit(ctx: _Ctx, out: _Out) -> _Out:
     info = dict(out.fit_info)
     t = time.perf_counter()
     Vf, fit_info = refit(V, F, fixed, ctx.index_a, ctx.fit_points, iterations=cfg.fit_iterations,
-                         samples_b=min(cfg.error_samples, 4000), seed=cfg.seed)
+                         samples_b=min(cfg.error_samples, 8000), seed=cfg.seed)
     info.update(fit_info)
     fit_s = time.perf_counter() - t
     t = time.perf_counter()
@@ -689,6 +690,7 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
     le = _local_error(ctx, V, F, spacing=h.b_to_a.spacing)
     tracker = _Tracker(ctx, F, h)
     fr = out.flip
+    stuck = False
     for _ in range(cfg.refine_rounds):
         val = tracker.values()
         mx = float(val.max())
@@ -705,7 +707,13 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
                 tracker.update(V, F, np.flatnonzero((F != F0).any(axis=1)))
         info: dict = {}
         V_mid = V.copy()
-        moved, _ = repair.polish(V, F, out.fixed, le, np.unique(F[hot].ravel()), ref=fr.ref,
+        verts = np.unique(F[hot].ravel())
+        if stuck:
+            # the last round could not lower these peaks: let the ring around them move too
+            ring = np.zeros(len(V), bool)
+            ring[verts] = True
+            verts = np.unique(F[ring[F].any(axis=1)].ravel())
+        moved, _ = repair.polish(V, F, out.fixed, le, verts, ref=fr.ref,
                                  tri_error=tracker.values())
         if moved:
             V, fr, _ = _no_new_flips(ctx, V_mid, V, F, fr, info)
@@ -758,7 +766,11 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
             break
         entry["largest_error_after"] = float(val.max()) / ctx.scale
         if val.max() >= mx:
-            break
+            if stuck:
+                break
+            stuck = True
+        else:
+            stuck = False
     repair_s = time.perf_counter() - t
     if np.array_equal(V, out.V) and np.array_equal(F, out.F):
         return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
@@ -1155,20 +1167,15 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             raw0 = _run(prep, method, target, cfg, lock, cap)
             lib_s += raw0.lib_seconds
             tol = _BORDER_TOLERANCE * raw0.lib_error
-            blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V))
             # the locks may take at most a quarter of the target's vertices (about target / 2):
-            # past that the tolerance grows, so the target stays reachable
+            # the chords that stray furthest are kept first
             budget = max(8, target // 8)
-            for _ in range(12):
-                if int(blk.sum()) <= budget or tol <= 0:
-                    break
-                tol *= 1.5
-                blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V))
-            border_log.update({"tolerance": tol / scale, "locked_vertices": int(blk.sum()),
+            blk = repair.border_locks(prep.V, ctx.chains, ctx.chain_ends, tol, len(prep.V), budget)
+            border_log.update({"tolerance": tol / scale, "budget": budget, "locked_vertices": int(blk.sum()),
                                "chain_vertices": int(sum(len(c) for c in ctx.chains))})
-            if int(blk.sum()) > budget:  # chain ends alone are too many (soups, many small seams)
+            if int(blk.sum()) > budget:  # the chains' ends alone are too many (soups, CSG slivers)
                 blk[:] = False
-                border_log.update({"locked_vertices": 0, "skipped": f"the chains need more than {budget} locks"})
+                border_log.update({"locked_vertices": 0, "skipped": f"the chains have more than {budget} ends"})
             lock |= blk
         best = None
         for rnd in range(rounds + 1):
@@ -1194,10 +1201,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     measuring = cfg.measure_error or kind == "error"
 
     def fitted(out: _Out) -> tuple[_Out, HausdorffResult | None]:
-        """The fit (kept unless it turns triangles against the input or into folds), and the
-        measure of the result."""
-        if cfg.fit_iterations <= 0:
-            return out, (_measure(ctx, out) if measuring else None)
+        """The fit (kept unless it turns triangles against the input or into folds: a peak it
+        raises is the refine rounds' business), and the measure of the result."""
         o1 = _fit(ctx, out)
         return o1, (_measure(ctx, o1) if measuring else None)
 

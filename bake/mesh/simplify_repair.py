@@ -114,26 +114,23 @@ def border_chains(F: np.ndarray, seam_edges: np.ndarray | None = None) -> tuple[
     return chains, ends
 
 
-def _douglas_peucker(P: np.ndarray, tol: float, closed: bool) -> np.ndarray:
-    """Indices of the points of a polyline (closed: a loop) that Douglas-Peucker keeps at
-    tolerance ``tol`` (distance to the chord)."""
-    n = len(P)
-    if n <= 3:
-        return np.arange(n)
-    keep = np.zeros(n, bool)
-    if closed:
-        far = int(np.argmax(np.linalg.norm(P - P[0], axis=1)))
-        keep[[0, far]] = True
-        Q = np.concatenate([P, P[:1]])
-        stack = [(0, far), (far, n)]
-    else:
-        keep[[0, n - 1]] = True
-        Q = P
-        stack = [(0, n - 1)]
-    while stack:
-        i, j = stack.pop()
+def border_locks(V: np.ndarray, chains: list[np.ndarray], ends: np.ndarray, tol: float, n: int,
+                 budget: int | None = None) -> np.ndarray:
+    """(n,) vertices to lock so each chain, simplified to them, stays within ``tol`` of itself
+    (Douglas-Peucker over all chains at once: the chord that strays furthest is split first, at
+    its furthest vertex, until every chord is within ``tol`` or ``budget`` vertices are locked).
+    An open chain's two ends are always kept (chains of at most 3 vertices: all of them)."""
+    import heapq
+
+    lock = np.zeros(n, bool)
+    ends_set = set(np.asarray(ends).tolist())
+    heap: list = []
+    polys: list[np.ndarray] = []
+
+    def push(ci: int, i: int, j: int) -> None:
         if j - i < 2:
-            continue
+            return
+        Q = polys[ci]
         a, ab = Q[i], Q[j] - Q[i]
         L = float(ab @ ab)
         X = Q[i + 1:j] - a
@@ -141,21 +138,36 @@ def _douglas_peucker(P: np.ndarray, tol: float, closed: bool) -> np.ndarray:
         d = np.linalg.norm(X - t[:, None] * ab, axis=1)
         k = int(np.argmax(d))
         if d[k] > tol:
-            m = i + 1 + k
-            keep[m % n] = True
-            stack += [(i, m), (m, j)]
-    return np.flatnonzero(keep)
+            heapq.heappush(heap, (-float(d[k]), ci, i, j, i + 1 + k))
 
-
-def border_locks(V: np.ndarray, chains: list[np.ndarray], ends: np.ndarray, tol: float, n: int) -> np.ndarray:
-    """(n,) vertices to lock so each chain, simplified to them, stays within ``tol`` of itself:
-    what Douglas-Peucker keeps (an open chain's two ends always; chains of at most 3 vertices:
-    all). ``ends`` (where chains meet) are kept by the library as it is."""
-    lock = np.zeros(n, bool)
-    ends_set = set(np.asarray(ends).tolist())
     for c in chains:
-        closed = len(c) > 2 and c[0] not in ends_set and c[-1] not in ends_set
-        lock[c[_douglas_peucker(V[c], tol, closed)]] = True
+        if len(c) <= 3:
+            lock[c] = True
+            continue
+        closed = c[0] not in ends_set and c[-1] not in ends_set
+        P = V[c]
+        ci = len(polys)
+        if closed:
+            far = int(np.argmax(np.linalg.norm(P - P[0], axis=1)))
+            polys.append(np.concatenate([P, P[:1]]))
+            lock[c[[0, far]]] = True
+            push(ci, 0, far)
+            push(ci, far, len(c))
+        else:
+            polys.append(P)
+            lock[c[[0, -1]]] = True
+            push(ci, 0, len(c) - 1)
+    order = {i: c for i, c in enumerate([c for c in chains if len(c) > 3])}
+    count = int(lock.sum())
+    while heap and (budget is None or count < budget):
+        _, ci, i, j, m = heapq.heappop(heap)
+        c = order[ci]
+        v = c[m % len(c)]
+        if not lock[v]:
+            lock[v] = True
+            count += 1
+        push(ci, i, m)
+        push(ci, m, j)
     return lock
 
 

@@ -1341,6 +1341,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                         "made exact at their points (bake/mesh/simplify_measure.py); fractions of the bbox diagonal",
         "hausdorff_max_exact": False if h is not None else None,
         "worst_point": None if h is None else [float(x) for x in h.worst_point],
+        "worst_point_original_to_simplified": None if h is None or h.a_to_b is None else
+        [float(x) for x in h.a_to_b.worst],
+        "worst_point_simplified_to_original": None if h is None or h.b_to_a is None else
+        [float(x) for x in h.b_to_a.worst],
         "topology_in": topo_in, "topology_out": topo_out,
         "folds_in": int(len(folds_in)), "folds_out": int(len(folds_out)),
         "fold_pairs": [[int(a), int(b)] for a, b in folds_out[:20]],

@@ -1,35 +1,30 @@
-"""How far a simplified surface is from the original (sampled symmetric Hausdorff distance), and
-which simplified triangles face against it (flips).
+"""Closest-triangle queries, exact distances and flip checks for the simplify stage (the
+Hausdorff measure itself, its sample and refinement, is in simplify_measure.py).
 
 Distances
 ---------
-Both directions are measured: points on the original surface against the simplified one
-(features that were cut off) and points on the simplified surface against the original
-(triangles that bulge out). Query points are every vertex of the sampled mesh plus
-``samples`` area-weighted random points (seeded, so the figure is reproducible).
+A :class:`SurfaceIndex` holds a scipy KD-tree over points on every triangle of one mesh: its
+centroid, for small and mid-size meshes three points near its corners, and area-weighted samples
+up to ``density`` (the input of the stage, usually fine and even, gets centroids only and eight
+candidates a query; tree points and query points are put in Z-order, which halves the tree
+time). A query point takes the owners of its ``k`` nearest tree points as candidate triangles,
+measures exact point-triangle distances to them (per-triangle constants are precomputed once,
+the arithmetic runs component-wise over all pairs in chunks), then walks to edge neighbours of
+the best one while that is closer (only points whose closest point is on an edge or corner of
+it walk). Every distance :meth:`SurfaceIndex.distance` returns is an upper bound of the true
+one, exact unless the closest triangle is neither a candidate nor reached by the walk.
 
-A :class:`SurfaceIndex` holds a scipy KD-tree over points on every triangle of one mesh (its
-centroid, three points near its corners, plus area-weighted samples up to ``density``; tree
-points and query points are put in Z-order, which halves the tree time). A query point takes
-the owners of its ``k`` nearest tree points as candidate triangles, measures exact
-point-triangle distances to them (per-triangle constants are precomputed once, the arithmetic
-runs component-wise over all pairs in chunks), then walks to edge neighbours of the best one
-while that is closer (only points whose closest point is on an edge or corner of it walk).
-Every reported distance is an upper bound of the true one, exact unless the closest triangle
-is neither a candidate nor reached by the walk (on the bunny at 10% and 1%: 0.2% of the query
-points; the mean is 7e-4 and 2e-4 above the exact mean over the same points). The maximum of each
-direction is then *verified*: the largest bounds are replaced, 64 at a time down the sorted
-bounds, by exact distances (64, then doubling blocks; every triangle whose bounding sphere comes within the bound, found
-with a ball query over the centroids) until the largest exact value is at least every bound
-left. So the max is exact over the query points (unless the verification needs more than
-1.5M point-triangle pairs, as on soups of large intersecting triangles whose bounds are loose:
-the max is then the largest bound left, an upper bound, and ``HausdorffResult.exact`` is
-False). Random samples rarely hit the worst spot
-of a large triangle, so the max is then sharpened: a fixed pattern of 128 points on each of the
-(at most 32) triangles where the largest distances were found is measured and verified too (on
-the bunny at 1%: 1.682% of the diagonal, against 1.458% from the 20,000 samples alone and
-1.705% from 1,000,000 samples; at 10% all three agree). tests/mesh/test_simplify_error.py
-checks the distances, the peaks and the mean against a brute-force evaluation.
+:meth:`SurfaceIndex.exact` makes a few distances exact: every triangle whose bounding sphere
+comes within the point's upper bound is measured (for meshes of up to 20,000 triangles every
+(point, triangle) pair's sphere bound is tested directly, for bigger ones a ball query over the
+centroids finds them). :func:`_verify` uses it on the largest bounds of a measurement, in
+blocks, until the largest exact value is at least every bound left, so the largest distance is
+exact at its point (unless that needs more than 1.5M point-triangle pairs, as on soups of large
+intersecting triangles whose bounds are loose: it is then the largest bound left, an upper
+bound, and says so). tests/mesh/test_simplify_error.py checks these against brute force.
+
+The big KD-tree queries run on all cores (scipy's worker threads); Ctrl-C is held back until
+they are done (bake/interrupt.py).
 
 Flips
 -----
@@ -72,12 +67,10 @@ from scipy.spatial import cKDTree
 
 from ..interrupt import deferred_interrupt
 
-__all__ = ["SurfaceIndex", "sample_surface", "point_triangle_distance", "hausdorff", "HausdorffResult",
-           "triangle_normals", "triangle_areas", "topology", "edge_counts", "flip_check", "FlipResult",
-           "reliable_normals", "triangle_pattern", "bounding_spheres"]
+__all__ = ["SurfaceIndex", "sample_surface", "point_triangle_distance", "triangle_normals", "triangle_areas",
+           "topology", "edge_counts", "flip_check", "FlipResult", "reliable_normals", "triangle_pattern",
+           "bounding_spheres"]
 
-# points of a fixed pattern on each triangle where a Hausdorff direction peaked (sharpens the max)
-_DENSE = 128
 # meshes of at most this many triangles are searched exhaustively
 _BRUTE = 8
 # query points handled per chunk (bounds the temporaries: ~16 floats per point-triangle pair)
@@ -544,44 +537,7 @@ class SurfaceIndex:
         return dist, tri
 
 
-# --------------------------------------------------------------------------- Hausdorff
-@dataclass
-class HausdorffResult:
-    max: float  # absolute units
-    mean: float  # mean of the two directions' area-weighted means
-    max_a_to_b: float  # original -> simplified (features cut off)
-    max_b_to_a: float  # simplified -> original (bulges)
-    mean_a_to_b: float
-    mean_b_to_a: float
-    worst_point: np.ndarray  # where the max was found
-    samples: int
-    # verified (exact) distances of the largest few query points of both directions, largest
-    # first, and where they are: where the error peaks (the refine rounds keep input there)
-    top_points: np.ndarray | None = None
-    top_dists: np.ndarray | None = None
-    # False when verifying the max ran out of its work budget (_VERIFY_PAIRS): ``max`` is then an
-    # upper bound of the true max over the query points (loose candidate bounds: soups of large
-    # intersecting triangles)
-    exact: bool = True
-
-
-def _query_points(V: np.ndarray, F: np.ndarray, samples: int, seed, index: SurfaceIndex | None = None
-                  ) -> tuple[np.ndarray, int, np.ndarray]:
-    """(points, how many of them are samples, where each lies: its triangle for a sample,
-    ``-1 - vertex`` for a vertex): ``samples`` seeded area-weighted points, then every vertex
-    the triangles use. Kept on ``index`` (the mesh's own index) for reuse: the original's
-    points are the same for every result measured against it."""
-    key = (int(samples), repr(seed))
-    if index is not None and key in index._query_cache:
-        return index._query_cache[key]
-    pts, tri, _ = sample_surface(V, F, samples, np.random.default_rng(seed))
-    used = np.unique(F.ravel()) if len(F) else np.zeros(0, np.int64)
-    out = (np.concatenate([pts, V[used]]), len(pts), np.concatenate([tri, -1 - used]))
-    if index is not None:
-        index._query_cache[key] = out
-    return out
-
-
+# --------------------------------------------------------------------------- verification
 def _verify(Q: np.ndarray, d: np.ndarray, index: SurfaceIndex, budget: int = _VERIFY_PAIRS
             ) -> tuple[np.ndarray, bool]:
     """Make the largest upper bounds ``d`` (in place) exact, in blocks down the sorted bounds
@@ -614,62 +570,6 @@ def _verify(Q: np.ndarray, d: np.ndarray, index: SurfaceIndex, budget: int = _VE
         if d[rest] > best:
             tops = np.concatenate([[rest], tops])
     return tops, exact
-
-
-def _directed(Q: np.ndarray, n_samples: int, where: np.ndarray, Vq: np.ndarray, Fq: np.ndarray,
-              index: SurfaceIndex, dense: int = _DENSE) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
-    """Max (verified), mean over the samples, worst point, and the verified largest few
-    (points, distances) of the distances from the query points ``Q`` (on mesh Vq, Fq) to
-    ``index``'s mesh. The max is then sharpened: ``dense`` points of a fixed pattern on each of
-    the (at most 32) triangles where the largest distances were found are measured too (the
-    random samples rarely hit the worst spot of a large triangle; they are not in the mean)."""
-    if len(Q) == 0:
-        return 0.0, 0.0, np.zeros(3), np.zeros((0, 3)), np.zeros(0), True
-    all_d, _ = index.distance(Q)
-    mean = float(all_d[:n_samples].mean()) if n_samples else 0.0
-    tops, exact = _verify(Q, all_d, index)
-    P, D = Q[tops], all_d[tops]
-    if dense > 0 and len(Fq):
-        w = where[tops[:32]]
-        tris = w[w >= 0]
-        verts = -1 - w[w < 0]
-        if len(verts):
-            inc = np.flatnonzero(np.isin(Fq, verts).any(axis=1))
-            tris = np.concatenate([tris, inc[:64]])
-        tris = np.unique(tris)
-        tid, bary = triangle_pattern(np.full(len(tris), dense, np.int64))
-        Pd = np.einsum("nk,nkd->nd", bary, Vq[Fq[tris[tid]]])
-        dd, _ = index.distance(Pd)
-        td, ex = _verify(Pd, dd, index)
-        exact = exact and ex
-        P, D = np.concatenate([P, Pd[td]]), np.concatenate([D, dd[td]])
-        o = np.argsort(-D, kind="stable")
-        P, D = P[o], D[o]
-    return float(D[0]), mean, P[0], P, D, exact
-
-
-def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, samples: int = 20000,
-              seed: int = 0, index_a: SurfaceIndex | None = None) -> HausdorffResult:
-    """Symmetric sampled Hausdorff distance between surface A (original) and B (simplified).
-    Query points: ``samples`` area-weighted points of each surface (A's drawn with
-    ``default_rng([seed, 0])``, B's with ``default_rng([seed, 1])``) and every vertex."""
-    Fa = np.asarray(Fa, np.int64).reshape(-1, 3)
-    Fb = np.asarray(Fb, np.int64).reshape(-1, 3)
-    if len(Fa) == 0 or len(Fb) == 0:
-        inf = 0.0 if len(Fa) == len(Fb) else float("inf")
-        return HausdorffResult(inf, inf, inf, inf, inf, inf, np.zeros(3), 0)
-    ia = index_a if index_a is not None else SurfaceIndex(Va, Fa, seed=seed)
-    ib = SurfaceIndex(Vb, Fb, seed=seed + 1)
-    Vb = np.asarray(Vb, np.float64)
-    Qa, na, wa = _query_points(ia.V, ia.F, samples, [seed, 0], ia)
-    Qb, nb, wb = _query_points(Vb, Fb, samples, [seed, 1])
-    mab, meab, pab, tpa, tda, xa = _directed(Qa, na, wa, ia.V, ia.F, ib)
-    mba, meba, pba, tpb, tdb, xb = _directed(Qb, nb, wb, Vb, Fb, ia)
-    worst = pab if mab >= mba else pba
-    tp, td = np.concatenate([tpa, tpb]), np.concatenate([tda, tdb])
-    order = np.argsort(-td, kind="stable")
-    return HausdorffResult(max(mab, mba), 0.5 * (meab + meba), mab, mba, meab, meba, worst, samples,
-                           tp[order], td[order], exact=bool(xa and xb))
 
 
 # --------------------------------------------------------------------------- topology checks

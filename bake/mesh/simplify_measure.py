@@ -55,6 +55,9 @@ _KEY_LEVEL = _MAX_LEVEL + 16
 # the points taken per refinement round, and the rounds
 SEEDS = 256
 ROUNDS = 12
+# the simplified surface's grid cuts every triangle into at least 4**MIN_LEVEL_SIMPLIFIED cells:
+# its corners are often the original's own vertices (distance 0), the peaks lie inside
+MIN_LEVEL_SIMPLIFIED = 1
 # separate places where the distance peaks, kept for the stage's repairs
 PEAKS = 64
 
@@ -83,13 +86,13 @@ def _tri_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return edges, inv.reshape(-1, 3), (a < b).reshape(-1, 3)
 
 
-def _grid_spacing(longest: np.ndarray, n_vertices: int, points: int, max_level: int) -> float:
+def _grid_spacing(longest: np.ndarray, n_vertices: int, points: int, max_level: int, min_level: int = 0) -> float:
     """A spacing for which the grid has about ``points`` nodes (bisection on its logarithm)."""
     if points <= n_vertices or len(longest) == 0:
         return float(longest.max()) if len(longest) else 1.0
 
     def count(s: float) -> float:
-        k = np.clip(np.ceil(np.log2(np.maximum(longest / s, 1.0))), 0, max_level)
+        k = np.clip(np.ceil(np.log2(np.maximum(longest / s, 1.0))), min_level, max(max_level, min_level))
         n = 2.0 ** k
         return n_vertices + float(((n - 1) * (n - 2) / 2 + 1.5 * (n - 1)).sum())
 
@@ -108,7 +111,7 @@ def _grid_spacing(longest: np.ndarray, n_vertices: int, points: int, max_level: 
 
 
 def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MAX_LEVEL,
-                 spacing: float | None = None) -> SurfaceGrid:
+                 spacing: float | None = None, min_level: int = 0) -> SurfaceGrid:
     """About ``points`` grid nodes over the mesh (every vertex among them); see the module
     docstring. Point keys: a vertex is its own id; an edge point is ``nV + edge * (M + 1) + q``
     for the point ``q / M`` of the way from the edge's lower-numbered end (``M = 2**_KEY_LEVEL``);
@@ -124,8 +127,9 @@ def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MA
     el = np.linalg.norm(C - C[:, [1, 2, 0]], axis=2)  # sides ab, bc, ca
     longest = el.max(axis=1)
     used = np.unique(F)
-    s = _grid_spacing(longest, len(used), points, max_level) if spacing is None else float(spacing)
-    level = np.clip(np.ceil(np.log2(np.maximum(longest / max(s, 1e-300), 1.0))), 0, max_level).astype(np.int64)
+    s = _grid_spacing(longest, len(used), points, max_level, min_level) if spacing is None else float(spacing)
+    level = np.clip(np.ceil(np.log2(np.maximum(longest / max(s, 1e-300), 1.0))), min_level,
+                    max(max_level, min_level)).astype(np.int64)
     if not level.any():  # every triangle is smaller than the spacing: the grid is the vertices
         remap = np.zeros(nV, np.int64)
         remap[used] = np.arange(len(used))
@@ -133,8 +137,9 @@ def surface_grid(V: np.ndarray, F: np.ndarray, points: int, max_level: int = _MA
         area = 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=1)
         tri = np.zeros(len(used), np.int64)
         tri[cells.ravel()] = np.repeat(np.arange(T), 3)
-        return SurfaceGrid(P=V[used], tri=tri, cells=cells, cell_tri=np.arange(T), cell_area=area, spacing=float(s),
-                           keys=used, levels=np.ones(T, np.int64))
+        # the grid's spacing is then the mesh's own: its median edge
+        return SurfaceGrid(P=V[used], tri=tri, cells=cells, cell_tri=np.arange(T), cell_area=area,
+                           spacing=float(np.median(el)), keys=used, levels=np.ones(T, np.int64))
     edges, side_edge, side_fwd = _tri_edges(F)
     M = 1 << _KEY_LEVEL
     inside_base = nV + len(edges) * (M + 1)
@@ -251,9 +256,12 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
-             verify: bool = True) -> Directed:
+             verify: bool = True, straddling: bool = False) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
-    module docstring."""
+    module docstring. With ``straddling``, every cell whose corners are closest to different
+    triangles of Y is cut once before the refinement (the distance to one triangle is convex
+    over a cell, largest at a corner; only where the closest triangle changes can it peak
+    inside)."""
     P = grid.P
     if len(P) == 0 or index_y.tree is None:
         inf = 0.0 if len(P) == 0 else float("inf")
@@ -262,58 +270,65 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     # area-weighted mean over the grid's cells
     w = grid.cell_area
     mean = float((w * d[grid.cells].mean(axis=1)).sum() / w.sum()) if w.sum() > 0 else float(d.mean())
-    cells, ctri = grid.cells, grid.cell_tri
-    n_pts = len(P)
-    mid_keys = np.zeros(0, np.int64)
-    mid_ids = np.zeros(0, np.int64)
-    apart = grid.spacing
-    allP, allD, allT, allN = P, d, grid.tri, near
-    pool = np.arange(len(P))  # where the next seeds are looked for: the last seeds and new points
-    for r in range(rounds):
-        # many places for the first rounds, fewer (the best of them) for the deeper ones
-        top = pool[_distinct_top(allP[pool], allD[pool], max(seeds >> (r // 2), min(seeds, 32)), apart)]
-        hot = np.zeros(n_pts, bool)
-        hot[top] = True
-        sel = np.flatnonzero(hot[cells].any(axis=1))
-        if len(sel) == 0:
-            break
+    st = {"cells": grid.cells, "ctri": grid.cell_tri, "P": P, "D": d, "T": grid.tri, "N": near,
+          "mid_keys": np.zeros(0, np.int64), "mid_ids": np.zeros(0, np.int64)}
+
+    def split(sel: np.ndarray) -> np.ndarray:
+        """Cut the cells ``sel`` into four (midpoints shared with neighbours cut before);
+        returns the ids of the new points."""
+        cells, ctri, allP = st["cells"], st["ctri"], st["P"]
+        n_pts = len(allP)
         c = cells[sel]
         a, b = np.concatenate([c[:, 0], c[:, 1], c[:, 2]]), np.concatenate([c[:, 1], c[:, 2], c[:, 0]])
         lo, hi = np.minimum(a, b), np.maximum(a, b)
-        ek = lo * (1 << 31) + hi
-        uk, inv = np.unique(ek, return_inverse=True)
-        # midpoints made before (by a neighbouring cell) are reused
-        pos = np.searchsorted(mid_keys, uk)
-        have = (pos < len(mid_keys)) & (mid_keys[np.minimum(pos, max(len(mid_keys) - 1, 0))] == uk) \
-            if len(mid_keys) else np.zeros(len(uk), bool)
+        uk, inv = np.unique(lo * (1 << 31) + hi, return_inverse=True)
+        mk, mi = st["mid_keys"], st["mid_ids"]
+        pos = np.searchsorted(mk, uk)
+        have = (pos < len(mk)) & (mk[np.minimum(pos, max(len(mk) - 1, 0))] == uk) if len(mk) else \
+            np.zeros(len(uk), bool)
         ids = np.empty(len(uk), np.int64)
-        ids[have] = mid_ids[pos[have]]
+        ids[have] = mi[pos[have]]
         new = np.flatnonzero(~have)
         ids[new] = n_pts + np.arange(len(new))
         ulo, uhi = uk[new] >> 31, uk[new] & ((1 << 31) - 1)
         Pn = 0.5 * (allP[ulo] + allP[uhi])
-        # the triangle of X a midpoint lies in: that of a cell it was made for
-        tn = np.empty(len(uk), np.int64)
+        tn = np.empty(len(uk), np.int64)  # the triangle of X a midpoint lies in
         tn[inv] = np.tile(ctri[sel], 3)
         dn, nn = index_y.distance(Pn)
-        n_pts += len(new)
-        allP = np.concatenate([allP, Pn])
-        allD = np.concatenate([allD, dn])
-        allT = np.concatenate([allT, tn[new]])
-        allN = np.concatenate([allN, nn])
-        pool = np.concatenate([top, n_pts - len(new) + np.arange(len(new))])
-        order = np.argsort(np.concatenate([mid_keys, uk[new]]), kind="stable")
-        mid_keys = np.concatenate([mid_keys, uk[new]])[order]
-        mid_ids = np.concatenate([mid_ids, ids[new]])[order]
+        st["P"] = np.concatenate([allP, Pn])
+        st["D"] = np.concatenate([st["D"], dn])
+        st["T"] = np.concatenate([st["T"], tn[new]])
+        st["N"] = np.concatenate([st["N"], nn])
+        order = np.argsort(np.concatenate([mk, uk[new]]), kind="stable")
+        st["mid_keys"] = np.concatenate([mk, uk[new]])[order]
+        st["mid_ids"] = np.concatenate([mi, ids[new]])[order]
         m = ids[inv].reshape(3, -1)  # midpoints of sides ab, bc, ca of each selected cell
         A, B, Cc = c[:, 0], c[:, 1], c[:, 2]
         kids = np.concatenate([np.stack([A, m[0], m[2]], 1), np.stack([m[0], B, m[1]], 1),
                                np.stack([m[2], m[1], Cc], 1), np.stack([m[0], m[1], m[2]], 1)])
         keep = np.ones(len(cells), bool)
         keep[sel] = False
-        cells = np.concatenate([cells[keep], kids])
-        ctri = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
-    D = allD.copy()
+        st["cells"] = np.concatenate([cells[keep], kids])
+        st["ctri"] = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
+        return n_pts + np.arange(len(new))
+
+    if straddling:
+        N = st["N"][st["cells"]]
+        split(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2])))
+    apart = grid.spacing
+    pool = np.arange(len(st["P"]))  # where the next seeds are looked for: the last seeds and new points
+    for r in range(rounds):
+        # many places for the first rounds, fewer (the best of them) for the deeper ones
+        allP, allD = st["P"], st["D"]
+        top = pool[_distinct_top(allP[pool], allD[pool], max(seeds >> (r // 2), min(seeds, 32)), apart)]
+        hot = np.zeros(len(allP), bool)
+        hot[top] = True
+        sel = np.flatnonzero(hot[st["cells"]].any(axis=1))
+        if len(sel) == 0:
+            break
+        pool = np.concatenate([top, split(sel)])
+    allP, D, allT, allN = st["P"], st["D"].copy(), st["T"], st["N"]
+    n_pts = len(allP)
     if verify:
         tops, exact = _verify(allP, D, index_y)
     else:  # upper bounds (the repairs compare before and after with the same index)
@@ -366,8 +381,10 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     ia = index_a if index_a is not None else SurfaceIndex(Va, Fa)
     ib = index_b if index_b is not None else SurfaceIndex(Vb, Fb)
     ga = grid_a if grid_a is not None else surface_grid(Va, Fa, points)
-    gb = surface_grid(Vb, Fb, points)
-    ab = directed(ib, ga, seeds=seeds, rounds=rounds)
+    gb = surface_grid(Vb, Fb, points, min_level=MIN_LEVEL_SIMPLIFIED)
+    # the original's side is cheap to measure (the simplified mesh is small): its cells that
+    # straddle two triangles of the simplified mesh are cut once, and four times the seeds
+    ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=True)
     ba = directed(ia, gb, seeds=seeds, rounds=rounds)
     worst = ab.worst if ab.max >= ba.max else ba.worst
     return HausdorffResult(max=max(ab.max, ba.max), mean=0.5 * (ab.mean + ba.mean), max_a_to_b=ab.max,

@@ -59,13 +59,13 @@ def _meshlab_distances(Vx, Fx, Vy, Fy, samples: int, vert_only: bool = False):
         r = ms.get_hausdorff_distance(sampledmesh=0, targetmesh=1, savesample=True, samplevert=True,
                                       sampleedge=True, sampleface=True, samplenum=int(samples),
                                       maxdist=pymeshlab.PureValue(diag))
-    # savesample adds the sample points (quality = distance) and their closest points
+    # savesample adds two point meshes: the closest points ("Hausdorff Closest Points") and the
+    # samples ("Hausdorff Sample Point"), each with the distance as vertex quality
     pts = None
     for i in range(ms.mesh_number()):
         m = ms.mesh(i)
-        if i >= 2 and m.vertex_number() and m.face_number() == 0:
+        if "sample" in m.label().lower():
             pts = m
-            break
     assert pts is not None, "MeshLab did not save its samples"
     P = np.asarray(pts.vertex_matrix(), np.float64)
     d = np.asarray(pts.vertex_scalar_array(), np.float64)

@@ -1,8 +1,10 @@
 """Simplify stage: budgets, measured error, flips, material edges, attributes, hard cases.
 
 References are independent of the code under test: pymeshlab's Hausdorff filter for the error
-metric, brute-force sampling for point-triangle distances, analytic UVs/colours of generated
-meshes, and geometric facts of the corpus files (flat boxes stay flat and closed).
+metric (tests/mesh/simplify_reference.py refines it around the worst samples), brute-force
+sampling for point-triangle distances, analytic UVs/colours of generated meshes, and geometric
+facts of the corpus files (flat boxes stay flat and closed). The shuffled-order targets are in
+test_simplify_targets.py, the measure against the reference in test_simplify_measure.py.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ import trimesh
 from bake.config import SimplifyConfig
 from bake.errors import ConfigError
 from bake.mesh import simplify as S
-from bake.mesh.simplify_error import (SurfaceIndex, hausdorff, point_triangle_distance, topology,
-                                      triangle_normals)
+from bake.mesh.simplify_error import SurfaceIndex, point_triangle_distance, topology, triangle_normals
+from bake.mesh.simplify_measure import hausdorff
 from bake.scene import Material, Scene, make_scene
 
 from conftest import corpus_path
@@ -127,7 +129,7 @@ def test_hausdorff_agrees_with_pymeshlab_and_is_exact_on_planes():
     # two parallel unit squares 0.01 apart: every distance is exactly 0.01
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
-    h = hausdorff(V, F, V + [0, 0, 0.01], F, samples=2000)
+    h = hausdorff(V, F, V + [0, 0, 0.01], F, points=2000)
     assert h.max == pytest.approx(0.01, rel=1e-9) and h.mean == pytest.approx(0.01, rel=1e-9)
     # a simplified bumpy sphere against MeshLab's sampled Hausdorff filter
     Va, Fa = bumpy_sphere(4)

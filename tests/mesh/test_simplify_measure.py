@@ -1,0 +1,106 @@
+"""The simplify stage's error figure against an independent measurement (issue 19).
+
+The reference (tests/mesh/simplify_reference.py) shares no code with bake's measure: MeshLab's
+Hausdorff filter on every vertex, points along every edge and 150,000+ area-weighted points,
+refined around its worst samples by cutting the triangles there finer and measuring every
+corner again (MeshLab), six times. Each direction's maximum reported by bake must be within
+2% of the reference's, both ways: not an under-estimate (as the stage's 0.159% against a true
+0.199% was), and not an over-estimate unless it is a real distance the reference missed (its
+point lies on the surface and is that far from the other one, brute force, checked here).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bake.config import SimplifyConfig
+from bake.mesh import simplify as S
+from bake.mesh import simplify_meshopt
+from bake.mesh.simplify_error import SurfaceIndex
+from bake.mesh.simplify_measure import hausdorff, surface_grid
+
+from conftest import corpus_path
+from simplify_reference import hausdorff_reference, point_triangle_distance
+
+MODELS = {
+    "bunny": ("stanford_bunny_res1_obj", "stanford-bunny.obj"),
+    "spot": ("spot_triangulated", "spot", "spot_triangulated.obj"),
+    "teapot": ("teapot_obj", "teapot.obj"),
+    "boolean": ("boolean_csg_slivers", "boolean.glb"),  # CSG parts: sharp edges, slivers
+}
+
+
+def within(ours: float, ref: float, worst: np.ndarray, X, Y) -> None:
+    """``ours`` is within 2% of ``ref``; or above it and a real distance: ``worst`` lies on X
+    and is ``ours`` away from Y (brute force over every triangle)."""
+    assert ours >= 0.98 * ref, (ours, ref)
+    if ours > 1.02 * ref:
+        assert point_triangle_distance(worst, X[0][X[1]]).min() <= 1e-9 * ours
+        assert point_triangle_distance(worst, Y[0][Y[1]]).min() == pytest.approx(ours, rel=1e-9), (ours, ref)
+
+
+def load(name: str):
+    from bake import pipeline
+    path = corpus_path(*MODELS[name])
+    return pipeline.run(pipeline.load_config_for(path), until="clean").scene
+
+
+def test_grid_holds_every_vertex_and_shares_edge_points():
+    """Every vertex is a grid point; points along an edge shared by two triangles with different
+    grid levels coincide exactly (one point, not two); cells cover the surface (their areas add
+    up to the mesh's)."""
+    import trimesh
+    m = trimesh.creation.icosphere(subdivisions=2)
+    V = np.asarray(m.vertices, np.float64)
+    F = np.asarray(m.faces, np.int64)
+    V[0] *= 3.0  # a few long triangles around one vertex: finer grids there than elsewhere
+    g = surface_grid(V, F, 4000)
+    assert len(np.unique(g.levels)) > 1
+    assert np.linalg.norm(g.P[:, None] - V[None], axis=2).min(axis=0).max() == 0.0
+    _, counts = np.unique(g.P, axis=0, return_counts=True)
+    assert counts.max() == 1  # no point twice
+    C = V[F]
+    area = 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=1).sum()
+    assert g.cell_area.sum() == pytest.approx(area, rel=1e-9)
+    assert abs(len(g.P) - 4000) < 0.6 * 4000
+
+
+@pytest.mark.corpus
+@pytest.mark.slow
+@pytest.mark.parametrize("name,ratio", [("bunny", 0.1), ("bunny", 0.01), ("spot", 0.1), ("teapot", 0.02),
+                                        ("boolean", 0.1)])
+def test_measure_matches_the_independent_reference(name, ratio):
+    sc = load(name)
+    target = max(4, int(round(sc.n_triangles * ratio)))
+    Fo, _ = simplify_meshopt.simplify(sc.positions, sc.triangles, target)
+    h = hausdorff(sc.positions, sc.triangles, sc.positions, Fo,
+                  index_a=SurfaceIndex(sc.positions, sc.triangles, corners=False, k=8))
+    ref = hausdorff_reference(sc.positions, sc.triangles, sc.positions, Fo, samples=150_000)
+    A, B = (sc.positions, sc.triangles), (sc.positions, Fo)
+    within(h.max_a_to_b, ref.a_to_b.max, h.a_to_b.worst, A, B)
+    within(h.max_b_to_a, ref.b_to_a.max, h.b_to_a.worst, B, A)
+
+
+@pytest.mark.corpus
+@pytest.mark.slow
+def test_stage_reports_what_the_reference_measures_and_says_it_is_sampled():
+    """The bunny to 10% with the default stage: the figure in the record is within 2% of the
+    independent measurement (was 0.159% reported as exact, 0.199% measured), and the record says
+    what was sampled."""
+    sc = load("bunny")
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.1))
+    diag = sc.scale()
+    ref = hausdorff_reference(sc.positions, sc.triangles, out.positions, out.triangles, samples=150_000)
+    acc = rec.accuracy
+    A, B = (sc.positions, sc.triangles), (out.positions, out.triangles)
+    within(acc["hausdorff_max_original_to_simplified"] * diag, ref.a_to_b.max,
+           np.asarray(rec.details["worst_point_original_to_simplified"]), A, B)
+    within(acc["hausdorff_max_simplified_to_original"] * diag, ref.b_to_a.max,
+           np.asarray(rec.details["worst_point_simplified_to_original"]), B, A)
+    assert rec.details["hausdorff_max_exact"] is False
+    sample = rec.details["error_sample"]
+    assert sample["original_grid_points"] >= sc.n_vertices  # every vertex at least
+    assert sample["simplified_grid_points"] > 4 * out.n_vertices  # vertices, edge midpoints and more
+    assert sample["refinement_points"] > 0
+    assert "sampled" in sample["max_is"]

@@ -1064,30 +1064,39 @@ def _attributes(prep: _Prepared, out: _Out, index_a: SurfaceIndex | None, notes:
 
 
 
-def _border_chord_max(prep: "_Prepared", out: _Out, chains: list, scale: float) -> float:
-    """How far the output's border and material-edge chords stray from the input's chains:
-    the largest distance from an input chain vertex to the output's border/seam edges (0 if
-    the input has none). Fraction of the diagonal."""
+def _border_chord_max(prep: "_Prepared", out: _Out, chains: list, scale: float) -> tuple[float, int]:
+    """How far the output's borders and seams stray from the input's: along each input chain
+    (open border, material edge, UV seam), the output keeps some of its vertices (unmoved); the
+    output edge between two kept vertices that follow each other on the chain is a chord of the
+    chain between them, and this is the largest distance of a chain vertex from its chord
+    (fraction of the diagonal). Also returns how many input chains kept fewer than two vertices
+    (a closed hole or a seam that vanished)."""
     if not chains:
-        return 0.0
-    verts = np.unique(np.concatenate(chains))
-    o_chains, _ = repair.border_chains(out.F, _region_edge_vertices(out.F, out.region, len(out.V))[1])
-    if not o_chains:
-        return float("nan")
-    segs = np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in o_chains if len(c) > 1] +
-                          [np.array([[c[-1], c[0]]]) for c in o_chains if len(c) > 2])
-    a, b = out.V[segs[:, 0]], out.V[segs[:, 1]]
-    P = prep.V[verts]
-    best = np.full(len(P), np.inf)
-    for s in range(0, len(segs), 2048):
-        aa, bb = a[s:s + 2048], b[s:s + 2048]
-        ab = bb - aa
-        L = np.einsum("ij,ij->i", ab, ab)
-        X = P[:, None, :] - aa[None]
-        t = np.clip(np.einsum("pij,ij->pi", X, ab) / np.where(L > 0, L, 1.0), 0, 1)
-        d = np.linalg.norm(X - t[..., None] * ab[None], axis=2).min(axis=1)
-        best = np.minimum(best, d)
-    return float(best.max()) / scale
+        return 0.0, 0
+    kept = np.zeros(len(prep.V), bool)
+    unmoved = np.linalg.norm(out.V - prep.V[out.src_vertex], axis=1) == 0
+    kept[out.src_vertex[unmoved]] = True
+    worst, gone = 0.0, 0
+    for c in chains:
+        idx = np.flatnonzero(kept[c])
+        closed = len(c) > 2 and c[0] != c[-1]
+        if len(idx) < 2:
+            gone += 1
+            continue
+        P = prep.V[c]
+        starts = idx
+        ends = np.r_[idx[1:], idx[0] + len(c)] if closed else idx[1:]
+        starts = starts[:len(ends)]
+        Q = np.concatenate([P, P]) if closed else P
+        for i, j in zip(starts.tolist(), ends.tolist()):
+            if j - i < 2:
+                continue
+            a, ab = Q[i], Q[j] - Q[i]
+            L = float(ab @ ab)
+            X = Q[i + 1:j] - a
+            t = np.clip((X @ ab) / L, 0.0, 1.0) if L > 0 else np.zeros(len(X))
+            worst = max(worst, float(np.linalg.norm(X - t[:, None] * ab, axis=1).max()))
+    return worst / scale, gone
 
 
 def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord]:
@@ -1289,6 +1298,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     for n in notes:
         rec.warn(n)
 
+    chord_max, chains_gone = _border_chord_max(prep, out, chains, scale)
+
     # ---- the new scene
     new = scene.replace(
         positions=np.ascontiguousarray(out.V, np.float64),
@@ -1354,7 +1365,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "border_vertices_off_input_border": border_off,
         "border_vertices_moved": border_moved,
         "border_locks": border_log,
-        "border_chord_max": _border_chord_max(prep, out, chains, scale) if chains else 0.0,
+        "border_chord_max": chord_max,
+        "border_chains_closed": chains_gone,
         "attributes": _attribute_notes(prep, out, method),
         "polygons": "dropped: every output triangle has tri_polygon = -1",
     })

@@ -418,7 +418,7 @@ def _literal(v: Any) -> str:
 
 
 _PROC_ARG = re.compile(r"%[sb]")
-BLOCK_ID_LENGTH = 8
+BLOCK_ID_LENGTH = 5
 
 
 @dataclass

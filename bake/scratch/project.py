@@ -164,7 +164,8 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                     record.warn("export.into_reader needs export.into_target = \"Stage\" "
                                 "(a sprite cannot read another sprite's lists): reader not added")
             else:
-                sprites.append(readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values)))
+                sprites.append(readers.reader_target(dataclasses.replace(spec, helpers=True), cfg.sprite_name,
+                                                     stage_lists=list(values)))
         data = sb3.merge_into(src, target, values, costumes, sprites=sprites)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)

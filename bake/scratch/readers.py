@@ -45,8 +45,9 @@ The camera model (the pen renderer and :func:`project` below, which mirrors it b
 the frame is x right, y up, z into the screen; the camera at ``(cx, cy, cz)`` turned ``yaw``
 degrees about y (positive turns right) and then ``pitch`` degrees about its x axis (positive looks
 up). With ``d = p - c``: ``x' = dx*cos(yaw) - dz*sin(yaw)``, ``z' = dx*sin(yaw) + dz*cos(yaw)``,
-``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; with ``w =
-focal / z''`` the stage position is ``(x' * w, y'' * w)``. Scratch's ``sin``/``cos`` take degrees
+``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; the stage
+position is ``((dx*(focal*cos(yaw)) - dz*(focal*sin(yaw))) / z'', (dy*(focal*cos(pitch)) -
+z'*(focal*sin(pitch))) / z'')``. Scratch's ``sin``/``cos`` take degrees
 and round to 10 decimals; the reference does the same. ``bake.render.Camera.yaw_pitch`` is the
 same camera for the numpy rasterizer (report.html's "green flag" preview).
 
@@ -193,12 +194,12 @@ def project(verts: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.
     dx = v[:, 0] - cam.x
     dy = v[:, 1] - cam.y
     dz = v[:, 2] - cam.z
+    f = float(cam.focal)
     z1 = dx * sy_ + dz * cy_
     z2 = dy * sp_ + z1 * cp_
     with np.errstate(divide="ignore", invalid="ignore"):
-        w = cam.focal / z2
-        px = (dx * cy_ - dz * sy_) * w
-        py = (dy * cp_ - z1 * sp_) * w
+        px = (dx * (f * cy_) - dz * (f * sy_)) / z2
+        py = (dy * (f * cp_) - z1 * (f * sp_)) / z2
     return px, py, z2
 
 
@@ -347,7 +348,7 @@ def _camera_blocks(r: ReaderBuilder) -> None:
         r.v(n, val)
     px, py, pz, bad = r.lst("_px"), r.lst("_py"), r.lst("_pz"), r.lst("_bad")
     i = r.v("_i")
-    dx, dy, dz, z1, z2, w = (r.v(n) for n in ("_dx", "_dy", "_dz", "_z1", "_z2", "_w"))
+    dx, dy, dz, z1, z2 = (r.v(n) for n in ("_dx", "_dy", "_dz", "_z1", "_z2"))
     syw, cyw, spt, cpt = (r.v(n) for n in ("_syaw", "_cyaw", "_spitch", "_cpitch"))
     near = r.v("near")
     nverts = div(B.list_length(m.verts), 3)
@@ -376,6 +377,9 @@ def _camera_blocks(r: ReaderBuilder) -> None:
     r.define("project vertices", [], [
         r.set("_syaw", B.mathop("sin", var("cam yaw"))), r.set("_cyaw", B.mathop("cos", var("cam yaw"))),
         r.set("_spitch", B.mathop("sin", var("cam pitch"))), r.set("_cpitch", B.mathop("cos", var("cam pitch"))),
+        # the screen's scale folded into the turn: focal * cos, focal * sin
+        r.set("_fcy", mul(var("focal"), cyw)), r.set("_fsy", mul(var("focal"), syw)),
+        r.set("_fcp", mul(var("focal"), cpt)), r.set("_fsp", mul(var("focal"), spt)),
         B.delete_all(px), B.delete_all(py), B.delete_all(pz),
         r.set("_i", 1),
         B.repeat(nverts, [
@@ -385,9 +389,8 @@ def _camera_blocks(r: ReaderBuilder) -> None:
             r.set("_z1", add(mul(dx, syw), mul(dz, cyw))),
             r.set("_z2", add(mul(dy, spt), mul(z1, cpt))),
             B.add_to(pz, z2),
-            r.set("_w", div(var("focal"), z2)),
-            B.add_to(px, mul(sub(mul(dx, cyw), mul(dz, syw)), w)),
-            B.add_to(py, mul(sub(mul(dy, cpt), mul(z1, spt)), w)),
+            B.add_to(px, div(sub(mul(dx, var("_fcy")), mul(dz, var("_fsy"))), z2)),
+            B.add_to(py, div(sub(mul(dy, var("_fcp")), mul(z1, var("_fsp"))), z2)),
             r.change("_i", 3),
         ]),
         *safe,
@@ -419,12 +422,15 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     fill = [
         colour,
         B.goto_xy(ax, ay), B.pen_down(), B.goto_xy(bx, by), B.goto_xy(cx, cy), B.goto_xy(ax, ay),
-        r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
-        r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
-        r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
-        B.if_(gt(n, 1), [
-            r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
-            B.repeat(sub(n, 1), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+        # n <= 1 whenever 2 * area <= 2 (the largest L - L^2 / (2 * area2) is area2 / 2)
+        B.if_(lt(a2, -2), [
+            r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
+            r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
+            r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
+            B.if_(gt(n, 1), [
+                r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
+                B.repeat(sub(n, 1), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+            ]),
         ]),
         B.pen_up(),
     ]

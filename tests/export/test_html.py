@@ -303,7 +303,7 @@ def test_report_opens_in_headless_chromium_and_shows_the_previews(baked, tmp_pat
     # the headlight, i.e. red == blue, green ~0, bright
     magenta = (np.abs(shot[..., 0] - shot[..., 2]) < 12) & (shot[..., 1] < 40) & (shot[..., 0] > 90)
     assert magenta.sum() > 2000, f"only {magenta.sum()} magenta pixels in the screenshot"
-    assert (np.all(shot == (58, 165, 93), axis=2)).sum() > 50  # the green limit bars
+    assert (np.all(shot == (58, 165, 93), axis=2)).sum() > 20  # the green limit bars (as wide as the share used)
 
 
 def test_lightmap_is_shown_decoded_and_lights_the_previews(baked, tmp_path):

@@ -37,9 +37,11 @@
  *
  * How (facts that hold for @turbowarp/packager 3.13.0):
  * - The .sb3 is packaged into one self-contained HTML page with the packager's Node API (its
- *   scaffolding ships inside the npm package, so no network: only an .sb3 missing an asset would
- *   make the page ask the asset server). Cloud variables are local; every request that is not a
- *   file:, data: or blob: URL is blocked and reported as an error, and DNS resolves nothing.
+ *   scaffolding ships inside the npm package, so no network). An .sb3 missing an asset would make
+ *   the packager download it: such a file is refused before packaging and reported ("packaging:
+ *   asset missing from the archive"), as is anything that is not a zip. In the page, cloud
+ *   variables are local; every request that is not a file:, data: or blob: URL is blocked and
+ *   reported as an error, and DNS resolves nothing.
  * - Debian's chromium runs headless with --use-angle=swiftshader --enable-unsafe-swiftshader (WebGL
  *   on the CPU), a 480x360 viewport at device scale 1, so the stage canvas has the stage's pixels.
  * - The page's frame loop is started (vm.start()) and the green flag pressed with vm.greenFlag();
@@ -82,8 +84,34 @@ function findChromium (given) {
 }
 
 // ------------------------------------------------------------------ packaging
+/* An .sb3 whose project.json names an asset the archive lacks would make the packager download it
+ * from the asset server: refuse it here, so the harness never goes to the network. */
+async function missingAssets (data) {
+    const JSZip = require('@turbowarp/jszip');
+    let zip;
+    try {
+        zip = await JSZip.loadAsync(data);
+    } catch (e) {
+        throw new Error('not an .sb3 (zip) archive');
+    }
+    const pj = zip.file('project.json');
+    if (!pj) throw new Error('no project.json in the archive');
+    const project = JSON.parse(await pj.async('string'));
+    const names = new Set(Object.keys(zip.files).map(n => n.replace(/^.*\//, '')));
+    const missing = [];
+    for (const t of project.targets || []) {
+        for (const a of [...(t.costumes || []), ...(t.sounds || [])]) {
+            const name = a.md5ext || `${a.assetId}.${a.dataFormat}`;
+            if (!names.has(name)) missing.push(name);
+        }
+    }
+    return missing;
+}
+
 async function packageProject (file, cacheDir) {
     const data = fs.readFileSync(file);
+    const missing = await missingAssets(data);
+    if (missing.length) throw new Error(`asset missing from the archive (not fetched): ${missing.join(', ')}`);
     const key = crypto.createHash('sha256').update(data).update(readVersion('@turbowarp/packager') || '')
         .digest('hex').slice(0, 24);
     const out = path.join(cacheDir, `${key}.html`);
@@ -281,7 +309,16 @@ async function main (plan, baseDir) {
         return {file, id: p.id || path.basename(file).replace(/\.[^.]*$/, '')};
     });
     const htmls = [];
-    for (const p of projects) htmls.push(await packageProject(p.file, cacheDir));
+    const refused = [];
+    for (const p of projects) {
+        try {
+            htmls.push(await packageProject(p.file, cacheDir));
+            refused.push(null);
+        } catch (e) {
+            htmls.push(null);
+            refused.push(e && e.message ? e.message : String(e));
+        }
+    }
     const puppeteer = require('puppeteer-core');
     const browser = await puppeteer.launch({
         executablePath: exe, headless: true, userDataDir: path.join(cacheDir, 'profile'),
@@ -295,7 +332,12 @@ async function main (plan, baseDir) {
         for (let i = 0; i < projects.length; i++) {
             for (const mode of plan.modes || ['compiled', 'interpreted']) {
                 if (mode !== 'compiled' && mode !== 'interpreted') throw new Error(`unknown mode ${mode}`);
-                out.results.push(await runOne(browser, htmls[i], projects[i], mode, plan, baseDir));
+                if (refused[i]) {
+                    out.results.push({id: projects[i].id, file: projects[i].file, mode, runs: [], snapshot: null,
+                        stage: null, lists: {}, variables: {}, errors: [`packaging: ${refused[i]}`]});
+                } else {
+                    out.results.push(await runOne(browser, htmls[i], projects[i], mode, plan, baseDir));
+                }
             }
         }
     } finally {

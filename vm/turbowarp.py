@@ -119,7 +119,9 @@ class Result:
     def problems(self) -> list[str]:
         """What a person would call broken: errors, a script still running, a blank stage."""
         out = list(self.errors)
-        if not self.done:
+        if not self.runs:
+            out.append("the project did not run")
+        elif not self.done:
             out.append(f"a script was still running ({self.runs[-1]['running'] if self.runs else '?'} threads)")
         if self.blank():
             out.append("the stage is blank")

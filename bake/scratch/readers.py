@@ -428,8 +428,12 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
             r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
             r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
             B.if_(gt(n, 1), [
+                # zigzag: a -> p1 -> p2 -> a -> p3 -> p4 -> a ... (p2k-1 -> p2k runs along b-c);
+                # repeat rounds (n - 1) / 2 up, so with n - 1 odd the last point is p_n = c
                 r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
-                B.repeat(sub(n, 1), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+                B.repeat(div(sub(n, 1), 2), [
+                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
             ]),
         ]),
         B.pen_up(),

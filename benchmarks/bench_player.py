@@ -91,8 +91,16 @@ def reader_bytes(path: Path, sprite: str = "Mesh") -> dict:
             "project_json_bytes": rep["project_json_bytes"]}
 
 
-def vm_blocks(paths: list[Path]) -> list[dict]:
-    jobs = [{"load": str(p), "runs": [{"greenFlag": True, "read": {"lists": [], "variables": []}}]} for p in paths]
+def vm_blocks(paths: list[Path], phases: list[bool]) -> list[dict]:
+    """Blocks of one green-flag frame; with ``phases``, also of ``project vertices`` and ``bsp walk``
+    alone (the new reader's blocks, from the green flag's camera)."""
+    jobs = []
+    for p, ph in zip(paths, phases):
+        runs = [{"greenFlag": True, "read": {"lists": [], "variables": []}}]
+        if ph:
+            runs += [{"call": {"target": "Mesh", "proccode": c, "args": []}, "read": {"lists": [], "variables": []}}
+                     for c in ("project vertices", "bsp walk")]
+        jobs.append({"load": str(p), "runs": runs})
     r = subprocess.run(["node", str(REPO / "vm" / "run.js"), "--plan", "-"], input=json.dumps({"jobs": jobs}),
                        capture_output=True, text=True, timeout=3600)
     out = json.loads(r.stdout)
@@ -101,7 +109,12 @@ def vm_blocks(paths: list[Path]) -> list[dict]:
         if job.get("error"):
             raise SystemExit(f"vm/run.js failed: {job['error']}")
         run = job["runs"][0]
-        res.append({"blocks_per_frame": run["blocks"], "vm_ms": run["ms"], "done": run["done"]})
+        row = {"blocks_per_frame": run["blocks"], "vm_ms": run["ms"], "done": run["done"]}
+        if len(job["runs"]) == 3:
+            row["blocks_project_vertices"] = job["runs"][1]["blocks"]
+            row["blocks_bsp_walk"] = job["runs"][2]["blocks"]
+            row["blocks_fill"] = run["blocks"] - row["blocks_project_vertices"] - row["blocks_bsp_walk"]
+        res.append(row)
     return res
 
 
@@ -118,6 +131,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="green flags per project and mode")
     ap.add_argument("--base", default="6f0151f", help="commit of the previous reader")
     ap.add_argument("--models", default="demo,teapot")
+    ap.add_argument("--screenshot", default="", help="also write the new reader's TurboWarp stage next to the "
+                    "green flag preview of the last model to this PNG (docs/images/turbowarp-teapot.png)")
     args = ap.parse_args()
     why = turbowarp.unavailable()
     if why:
@@ -153,7 +168,7 @@ def main() -> None:
                 row[who] = {"triangles": info["triangles"], "vertices": info["vertices"], **reader_bytes(out)}
                 baked.append((name, who, out))
             results["models"].append(row)
-        for (name, who, out), vmres in zip(baked, vm_blocks([b[2] for b in baked])):
+        for (name, who, out), vmres in zip(baked, vm_blocks([b[2] for b in baked], [b[1] == "new" for b in baked])):
             next(r for r in results["models"] if r["model"] == name)[who].update(vmres)
         run = turbowarp.run([(f"{n}-{w}", p) for n, w, p in baked], modes=("compiled", "interpreted"),
                             repeat=args.repeat)
@@ -179,6 +194,20 @@ def main() -> None:
                 view, pim = preview.stage_view(mesh, auto_camera(lists["verts"]))
                 row["agreement"] = {m: preview.stage_agreement(run.get(f"{name}-{who}", m).image, view, pim)
                                     for m in ("compiled", "interpreted")}
+                if args.screenshot:
+                    from PIL import Image
+
+                    from PIL import ImageDraw
+
+                    gap = np.full((360, 16, 3), 255, np.uint8)
+                    pic = np.concatenate([run.get(f"{name}-{who}", "compiled").image, gap, view.painter], 1)
+                    im = Image.fromarray(pic)
+                    d = ImageDraw.Draw(im)
+                    d.text((8, 8), "TurboWarp 3.13 player, compiled: the stage after the green flag", fill=(0, 0, 0))
+                    d.text((504, 8), "report.html green flag preview (numpy rasterizer)", fill=(0, 0, 0))
+                    d.line([(487, 0), (487, 359)], fill=(200, 200, 200))
+                    Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)
+                    im.save(args.screenshot, optimize=True)
         for row in results["models"]:
             n, p = row["new"], row["previous"]
             row["ratio_previous_to_new"] = {
@@ -213,6 +242,11 @@ def main() -> None:
             print(f"  {row['model']} {mode}: interior within 1 level {a['within_1']:.4f} of {a['interior_pixels']:,}, "
                   f"covered within 1 level {a['covered_within_1']:.4f} of {a['covered_inner_pixels']:,}, "
                   f"blank interior {a['interior_left_blank']}, painted empty {a['empty_painted']}")
+    for row in results["models"]:
+        n = row["new"]
+        if "blocks_bsp_walk" in n:
+            print(f"{row['model']}: new frame = project vertices {n['blocks_project_vertices']:,} + bsp walk "
+                  f"{n['blocks_bsp_walk']:,} + fill {n['blocks_fill']:,} blocks")
     print(f"\nwrote {OUT.relative_to(REPO)} ({results['seconds']:.0f} s)")
 
 

@@ -218,7 +218,7 @@ def main() -> None:
                     pic = np.concatenate([run.get(f"{name}-{who}", "compiled").image, gap, view.painter], 1)
                     im = Image.fromarray(pic)
                     d = ImageDraw.Draw(im)
-                    d.text((8, 8), "TurboWarp 3.13 player, compiled: the stage after the green flag", fill=(0, 0, 0))
+                    d.text((8, 8), "TurboWarp player (packager 3.13.0), compiled: the stage after the green flag", fill=(0, 0, 0))
                     d.text((504, 8), "report.html green flag preview (numpy rasterizer)", fill=(0, 0, 0))
                     d.line([(487, 0), (487, 359)], fill=(200, 200, 200))
                     Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)

@@ -78,6 +78,10 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
         if bad:
             raise LimitError(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
                              f"{bad[0]['limit']}; see {out / 'report.md'}")
+        problems = rep.get("problems", [])
+        if problems:
+            raise LimitError(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
+                             f"{problems[0]['message']}; see {out / 'report.md'}")
     return rep
 
 
@@ -252,7 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")
     r.add_argument("--out", help="output folder (default: bake-out/<name>)")
     r.add_argument("--depfile", help="write Make-style dependencies to this file")
-    r.add_argument("--strict", action="store_true", help="exit 4 if a Scratch limit is exceeded")
+    r.add_argument("--strict", action="store_true",
+                   help="exit 4 if a Scratch limit is exceeded or the bake has a problem (e.g. all-black lighting)")
     common(r)
     r.set_defaults(func=cmd_run)
 

@@ -350,7 +350,7 @@ class ExportConfig:
 
 @dataclass
 class ReportConfig:
-    strict: bool = False  # an exceeded limit makes the bake exit non-zero
+    strict: bool = False  # like --strict: an exceeded limit or a problem (all-black lighting) exits 4
     html: bool = True  # write report.html (previews, limit bars, stage table, sweeps)
     preview_width: int = 320  # pixels per preview image (height is 3/4 of it)
 

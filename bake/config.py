@@ -305,6 +305,7 @@ class ListNames:
     vertex_colors: str = "vert colors"
     uvs: str = "tri uvs"
     lightmap_uvs: str = "lightmap uvs"
+    two_sided: str = "mat two-sided"
     quads: str = "quads"
     ngons: str = "ngons"
 
@@ -320,6 +321,10 @@ class ExportConfig:
     vertex_colors: Literal["auto", "yes", "no"] = "auto"
     uvs: Literal["auto", "yes", "no"] = "auto"
     lightmap_uvs: Literal["auto", "yes", "no"] = "auto"  # auto: when the scene has a lightmap atlas
+    # Which materials are two-sided (1) or single-sided (0), one item per material in "mat colors"
+    # order. auto: when a material is two-sided or a BSP tree is written (its walk skips
+    # single-sided triangles that face away); without the list every material is single-sided.
+    two_sided: Literal["auto", "yes", "no"] = "auto"
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"

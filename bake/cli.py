@@ -228,13 +228,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
-    cfg = config_mod.Config()
-    for key in config_mod.all_keys():
-        try:
-            val = config_mod.get_key(cfg, key)
-        except BakeError:
-            val = "?"
-        print(f"{key} = {json.dumps(val) if not isinstance(val, list) else json.dumps(config_mod.to_dict(val))}")
+    # arrays of tables list their fields too: lighting.lights[].kind = "sun", ...
+    for key, val in config_mod.key_defaults():
+        print(f"{key} = {json.dumps(val)}")
     return 0
 
 

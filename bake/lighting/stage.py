@@ -14,9 +14,12 @@ Flow (each step in its own module):
    ``face_colors``. The linear irradiance and every component with its standard error stay in
    ``scene.artefacts["lighting"]`` (a :class:`LightingResult`).
 
-The record lists every effect that ran (rays, seconds, error = RMS standard error of the point
-estimates, in irradiance units; AO in AO units) and every one that was skipped, with the reason,
-and splits the time into ray generation, Embree and shading (thread-seconds).
+The record lists every effect that ran (rays, seconds, error = an estimate of the RMSE of its
+values over the sample points: the RMS of the points' standard errors, in irradiance units; AO in
+AO units and calibrated against a high-sample reference, see ``ao.py``) and every one that was
+skipped, with the reason, and splits the time into ray generation, Embree and shading
+(thread-seconds). A bake whose every colour is black, or that has no light source, gets a
+warning, the effects ``light sources`` / ``all black`` and a record problem (``--strict`` fails).
 """
 
 from __future__ import annotations

@@ -75,13 +75,16 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
         print(f"  wrote {out}/ (report.md, report.json{extra}, lists)")
     if strict or cfg.report.strict:
         bad = [lim for lim in rep["limits"] if not lim["ok"]]
-        if bad:
-            raise LimitError(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
-                             f"{bad[0]['limit']}; see {out / 'report.md'}")
         problems = rep.get("problems", [])
+        what = []
+        if bad:
+            what.append(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
+                        f"{bad[0]['limit']}")
         if problems:
-            raise LimitError(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
-                             f"{problems[0]['message']}; see {out / 'report.md'}")
+            what.append(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
+                        f"{problems[0]['message']}")
+        if what:
+            raise LimitError("; ".join(what) + f"; see {out / 'report.md'}")
     return rep
 
 

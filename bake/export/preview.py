@@ -111,17 +111,30 @@ def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
 
 
 # --------------------------------------------------------------------------- cameras
+def stage_camera(cam, width: int = 480) -> Camera:
+    """The reader sprite's camera (``bake.scratch.readers.Camera``: position, yaw, pitch, focal on
+    the 480 x 360 stage) as a render camera ``width`` pixels wide, so a preview shows exactly the
+    stage the green flag draws (scaled): the same projection, the same mirror sense."""
+    scale = width / 480.0
+    return Camera.yaw_pitch((cam.x, cam.y, cam.z), cam.yaw, cam.pitch, cam.focal * scale, width=width,
+                            height=int(round(360 * scale)), near=cam.near)
+
+
 def cameras(verts: np.ndarray, width: int = 320, height: int = 240, fov: float = 45.0
             ) -> list[tuple[str, Camera]]:
-    """Three views that frame the model's bounding sphere: front-right above, back-left, top.
-    The frame is the export's (y up); "front" looks along +z as in the default left-handed frame."""
+    """Four views: the green flag's (the reader sprite's camera, :func:`bake.scratch.project.auto_camera`,
+    on a stage-shaped image ``width`` wide), then three that frame the model's bounding sphere:
+    front right above, back left, top. The frame is the export's (x right, y up, z into the
+    screen): "front" looks along +z, "right" is +x."""
+    from ..scratch.project import auto_camera
+
+    out = [("green flag", stage_camera(auto_camera(verts), width))] if len(verts) else []
     lo, hi = verts.min(0), verts.max(0)
     c = (lo + hi) / 2.0
     r = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-12)
     tan_v = math.tan(math.radians(fov) / 2.0)
     tan_h = tan_v * width / height
-    out = []
-    for name, az, el in (("front right", -35.0, 25.0), ("back left", 145.0, 20.0), ("top", -10.0, 80.0)):
+    for name, az, el in (("front right", 35.0, 25.0), ("back left", -145.0, 20.0), ("top", 10.0, 80.0)):
         a, e = math.radians(az), math.radians(el)
         d = np.array([math.sin(a) * math.cos(e), math.sin(e), -math.cos(a) * math.cos(e)])
         probe = Camera(position=tuple(c + d), look_at=tuple(c), fov=fov, width=width, height=height)

@@ -83,13 +83,14 @@ def _effect_order(plan: Plan, baker: Baker | None) -> list[dict]:
     return out
 
 
-def _sources(plan: Plan) -> tuple[bool, str]:
+def _sources(plan: Plan, cfg: LightingConfig) -> tuple[bool, str]:
     """Whether anything can light the scene, and what (for the ``light sources`` effect)."""
     parts = [lt.label for lt in plan.lights]
     if plan.sky:
         parts.append("sky")
     if np.any(plan.ambient > 0):
-        parts.append("ambient " + ("white (AO-only bake)" if any("ambient taken as white" in n for n in plan.notes)
+        ao_only = not any(x > 0 for x in cfg.ambient)  # the plan took the ambient as white
+        parts.append("ambient " + ("white (AO-only bake)" if ao_only
                                    else "[" + ", ".join(f"{x:g}" for x in plan.ambient) + "]"))
     if parts:
         return True, ", ".join(parts)
@@ -134,7 +135,7 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
     baker = Baker(scene, cfg, plan, albedo)
     out = baker.run()
     rec.effects = _effect_order(plan, baker)
-    has_source, what = _sources(plan)
+    has_source, what = _sources(plan, cfg)
     rec.effects.insert(0, {"name": "light sources", "ran": has_source, "reason": what, "rays": 0,
                            "seconds": 0.0})
     black = _black(out, baker, cfg, has_source, what)

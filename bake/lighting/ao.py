@@ -5,10 +5,10 @@
 (``sampling.mean_and_se``). For AO that estimate is about 1.4-1.6 times the real error: a pair
 straddling an occluder's edge counts the difference of its two strata (mostly signal) as noise,
 and an occluder's edge is what AO is made of. Measured against a reference of 2 x 4096 rays per
-point (its own noise subtracted), the RMS pair estimate over the points was 1.34-1.57 times the
-actual RMSE on the corpus bunny, house and duck at 16-1024 samples (bunny 256: 0.00962 against
-0.00620). The stage's ``error`` for AO is therefore the pair estimate times
-``AO_ERROR_CALIBRATION`` = 1 / 1.3, which puts it at 1.03-1.21 times the actual RMSE on those models;
+point (its own noise subtracted; ``benchmarks/bench_ao_error.py``), the RMS pair estimate over the
+points was 1.34-1.57 times the actual RMSE on the corpus bunny, house and duck at 16-1024 samples
+(bunny 256: 0.00962 against 0.00620). The stage's ``error`` for AO is therefore the pair estimate
+times ``AO_ERROR_CALIBRATION`` = 1 / 1.3, which put it at 1.03-1.21 times the actual RMSE there;
 ``tests/lighting/test_lighting_convergence.py`` checks it stays between 1.0 and 1.3 times the error
 measured against a high-sample reference. The per-point standard errors and ``error_bound``
 (which adds the ``1/N`` resolution floor) stay conservative, for bounds such as ``|ao - exact| <=

@@ -85,7 +85,8 @@ def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.Reader
     if n.vertices in values and n.triangles in values:
         mesh = readers.MeshNames(verts=n.vertices, tris=n.triangles,
                                  mat_colors=n.materials if n.materials in values else None,
-                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None)
+                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None,
+                                 two_sided=getattr(n, "two_sided", "mat two-sided"))
     cam = auto_camera(values[n.vertices]) if mesh else readers.Camera()
     two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
     return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),

@@ -97,6 +97,7 @@ class MeshNames:
     tris: str = "tris"
     mat_colors: str | None = "mat colors"
     tri_colors: str | None = "tri colors"
+    two_sided: str = "mat two-sided"  # read from the project when the bake wrote it, else the sprite's own
 
 
 @dataclass
@@ -412,7 +413,7 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
                  r.set(f"_{name}x", item(ik, px)), r.set(f"_{name}y", item(ik, py))]
     load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
     if _two_sided(r.spec):
-        two = r.lst("mat two-sided", [int(x) for x in r.spec.two_sided])
+        two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
         load.append(B.if_(eq(item(item(add(b, 4), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
     unusable = gt(add(add(item(var("_i1"), bad), item(var("_i2"), bad)), item(var("_i3"), bad)), 0)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))

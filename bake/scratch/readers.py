@@ -30,7 +30,7 @@ custom block                                what it does                        
                                             list without a BSP tree), fill every
                                             triangle that faces the camera on
                                             screen with the pen, in that order
-``load triangle (t)``                       (the .sprite3 only) corners of       the mesh lists
+``load triangle (t)``                       (.sprite3, into-project) corners of  the mesh lists
                                             triangle t into ``x1 y1 z1 .. z3``,
                                             its colour into ``tri color``
 ``bvh ray (ox) (oy) (oz) (dx) (dy) (dz)``   closest hit: ``hit tri`` (scene      ``bake.bvh.traverse.

@@ -162,7 +162,7 @@ def main() -> None:
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     results = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "loadavg_before": load0},
-               "base": args.base, "repeat": args.repeat, "models": []}
+               "base": args.base, "repeat": args.repeat, "fresh": args.fresh, "models": []}
     with tempfile.TemporaryDirectory(prefix="bench-player-") as tmp:
         tmp = Path(tmp)
         base = tmp / "base"

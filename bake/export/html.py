@@ -69,34 +69,47 @@ def bar_class(fraction: float) -> str:
 
 
 # --------------------------------------------------------------------------- reading the output folder
-def _load_json(path: Path) -> Any:
+def _read(out_dir: Path, rel: str, files: dict[str, bytes] | None) -> bytes | None:
+    """``out_dir/rel`` as the bake being written will leave it: from ``files`` (what is about to be
+    committed) when it is there, else from disk; None if neither has it."""
+    if files is not None and rel in files:
+        return files[rel]
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+        return (out_dir / rel).read_bytes()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        return None
+
+
+def _load_json(out_dir: Path, rel: str, files: dict[str, bytes] | None = None) -> Any:
+    path = out_dir / rel
+    data = _read(out_dir, rel, files)
+    if data is None:
         raise InputError("not found: is this a bake output folder? (bake run writes report.json and lists.json)",
-                         path=path) from None
+                         path=path)
+    try:
+        return json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(f"cannot be read as JSON: {e}", path=path) from None
 
 
-def _sb3_costumes(out_dir: Path, report: dict) -> dict[str, bytes]:
+def _sb3_costumes(out_dir: Path, report: dict, files: dict[str, bytes] | None = None) -> dict[str, bytes]:
     """Costume name -> image bytes from the .sb3 this bake wrote (if any)."""
     from ..scratch.sb3 import read_archive
 
     sb3s = sorted(k for k, v in report.get("outputs", {}).items() if k.endswith(".sb3") and v != "removed")
     out: dict[str, bytes] = {}
     for name in sb3s:
-        path = out_dir / name
-        if not path.is_file():
+        data = _read(out_dir, name, files)
+        if data is None:
             continue
-        files = read_archive(path)
+        entries = read_archive(data)
         try:
-            project = json.loads(files.get("project.json", b"{}"))
+            project = json.loads(entries.get("project.json", b"{}"))
         except json.JSONDecodeError:
             continue
         for target in project.get("targets", []):
             for c in target.get("costumes", []):
-                data = files.get(c.get("md5ext", ""))
+                data = entries.get(c.get("md5ext", ""))
                 if data is not None and c.get("name") not in out:
                     out[c["name"]] = data
         break
@@ -317,17 +330,21 @@ def _sweeps_section(sweeps: list[dict]) -> str:
 
 
 # --------------------------------------------------------------------------- the page
-def build(out_dir: Path, *, width: int = 320, height: int = 240) -> tuple[str, dict[str, Any]]:
-    """The report page for a finished bake in ``out_dir`` and facts about what it shows."""
+def build(out_dir: Path, *, width: int = 320, height: int = 240,
+          files: dict[str, bytes] | None = None) -> tuple[str, dict[str, Any]]:
+    """The report page for a finished bake in ``out_dir`` and facts about what it shows.
+    ``files`` (relative path -> bytes): a bake's outputs not yet on disk, read instead of the
+    folder's (``bake run`` renders the page before it commits anything)."""
     from . import preview
 
     out_dir = Path(out_dir)
-    report = _load_json(out_dir / "report.json")
+    report = _load_json(out_dir, "report.json", files)
     cfg = report.get("config", {})
     json_name = cfg.get("export", {}).get("json_name", "lists.json")
-    lists_doc = _load_json(out_dir / json_name) if (out_dir / json_name).is_file() else {"lists": {}}
+    has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
+    lists_doc = _load_json(out_dir, json_name, files) if has_json else {"lists": {}}
     lists = lists_doc.get("lists", {})
-    costumes = _sb3_costumes(out_dir, report)
+    costumes = _sb3_costumes(out_dir, report, files)
     textures = decoded_textures(lists, report, costumes)
     lightmap = next((t for t in textures if t["name"] == "lightmap"), None)
     lm_img = None
@@ -353,7 +370,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240) -> tuple[str, d
     if views:
         body.append(_views_section(views, mesh))
     else:
-        why = (f"{json_name} was not written (export.json = false)" if not (out_dir / json_name).is_file() else
+        why = (f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
     body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps)]

@@ -19,6 +19,7 @@ the few microseconds of the commit, each file is still complete, old or new.)
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import signal
@@ -187,6 +188,7 @@ class Outputs:
         self.status: dict[str, str] = {}
         self._rels: set[str] = set()
         self._staged: list[tuple[Path, Path]] = []  # (temporary, target)
+        self._attempted: list[Path] = []
         self._touch: list[Path] = []
         self._done = False
         try:
@@ -222,7 +224,7 @@ class Outputs:
                 self._touch.append(target)
             self.status[rel] = "unchanged"
         else:
-            self._staged.append((self._stage(target, data), target))
+            self._stage(target, data)
             self.status[rel] = "written"
         return self.status[rel]
 
@@ -234,11 +236,12 @@ class Outputs:
         if path.is_dir():
             raise ConfigError("--depfile names a folder, not a file", path=path)
         if not _same_bytes(path, data):
-            self._staged.append((self._stage(path, data), path))
+            self._stage(path, data)
 
-    def _stage(self, target: Path, data: bytes) -> Path:
+    def _stage(self, target: Path, data: bytes) -> None:
+        self._attempted.append(target)  # before the temporary exists: abort() finds it by name
         try:
-            return _stage_temp(target, data)
+            self._staged.append((_stage_temp(target, data), target))
         except OSError as e:
             raise output_error(e, target) from None
 
@@ -258,7 +261,7 @@ class Outputs:
         manifest = json.dumps({"files": sorted(self._rels | set(self.keep))}, indent=1).encode()
         man = self.out_dir / MANIFEST
         if not _same_bytes(man, manifest):
-            self._staged.append((self._stage(man, manifest), man))
+            self._stage(man, manifest)
         with signals_held():
             where = self.out_dir
             try:
@@ -295,10 +298,19 @@ class Outputs:
                 f = f.parent
 
     def abort(self) -> None:
+        """Remove every temporary this set made, including one whose name an interrupt kept from
+        being recorded (found by its target's name pattern)."""
         for tmp, _ in self._staged:
             if tmp.exists():
                 _unlink(tmp)
+        for target in self._attempted:
+            try:
+                for tmp in target.parent.glob(f".{glob.escape(target.name)}.*{TMP_SUFFIX}"):
+                    _unlink(tmp)
+            except OSError:
+                pass
         self._staged = []
+        self._attempted = []
 
     def __enter__(self) -> "Outputs":
         return self

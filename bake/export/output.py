@@ -101,23 +101,26 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) ->
                                  files={**files, "report.json": rep_json})
             outs.add("report.html", page.encode("utf-8"))
         if depfile is not None:
-            outs.add_file(Path(depfile), depfile_for(result, out_dir, sorted(files)).encode("utf-8"))
+            outs.add_file(Path(depfile), depfile_for(result, out_dir).encode("utf-8"))
         outs.commit()
     return rep
 
 
-def depfile_for(result: BakeResult, out_dir: Path, rels: list[str]) -> str:
-    """Make rules: the outputs (named as ``--out`` was given, so they match the Makefile's own
-    target names) depend on every file the bake read, and on the folder of every file it looked
-    for and did not find (adding the file there changes the folder's time, so make rebakes)."""
+def depfile_for(result: BakeResult, out_dir: Path) -> str:
+    """Make rules: ``OUT/report.json`` (named as ``--out`` was given, so it matches the Makefile's
+    own target name) depends on every file the bake read, and on the folder of every file the
+    model names that was not found (adding the file there changes the folder's time, so make
+    rebakes)."""
     src = result.scene.source
     deps = [p.resolve() for p in src.files_read]
     if result.config.source:
         deps.append(Path(result.config.source).resolve())
     for p in getattr(src, "files_missing", ()):
         deps.extend(_watch_folders(Path(p)))
-    targets = [out_dir / f for f in rels] + [out_dir / "report.json"]
-    return depfile_text(targets, sorted(set(deps)))
+    # report.json alone: every bake rewrites it. Naming the list files too would make them targets
+    # with no recipe that look out of date after every input edit (they are rewritten only when
+    # their bytes change), so every rule consuming them would rerun.
+    return depfile_text([out_dir / "report.json"], sorted(set(deps)))
 
 
 def _watch_folders(missing: Path) -> list[Path]:

@@ -143,15 +143,11 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:
-    """A stage's range check names the key; add the config file and the key's line in it."""
-    if e.path is not None or cfg.source is None or e.key is None:
+    """A stage's range check names the key; add where its value came from (the config file and
+    the key's line, or the --set on the command line)."""
+    if e.path is not None or e.key is None:
         return e
-    try:
-        text = cfg.source.read_text("utf-8")
-    except (OSError, UnicodeDecodeError):
-        text = None
-    return ConfigError(e.message, path=cfg.source, line=config_mod._Where(text, cfg.source).line_of(e.key),
-                       key=e.key)
+    return config_mod.error_at(cfg, e.key, e.message)
 
 
 def check_coordinates(scene: Scene, stage: str, cfg: Config) -> None:
@@ -193,6 +189,10 @@ def load_config_for(target: str | Path, overrides: list[str] | None = None) -> C
                               key="input.path")
         return cfg
     cfg = config_mod.load(None, overrides)
+    given = config_mod.origin(cfg, "input.path")
+    if given is not None:
+        raise ConfigError(f"{given} names a model, and so does the command line ({p}); give one model, or "
+                          "a config whose input.path names it", key="input.path")
     cfg.input.path = str(p.resolve())
     cfg.base_dir = Path.cwd()
     return cfg

@@ -80,6 +80,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         raise ConfigError(f"--vary expects section.key=v1,v2,..., got {text!r}")
     key, vals = text.split("=", 1)
     key = key.strip()
+    config_mod.get_key(Config(), key)  # an unknown key is named as such, with a suggestion
     if key not in config_mod.numeric_keys():
         raise ConfigError("is not a numeric key (sweep varies ints and floats)", key=key)
     out: list[float] = []

@@ -257,6 +257,9 @@ class LightmapConfig:
     cache_dir: str = ""
     # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
     out_dir: Path | None = field(default=None, metadata={"internal": True})
+    # Whether the lighting stage will fill the atlas (lighting.target = "lightmap"; not a TOML key:
+    # the pipeline sets it): the memory estimate then counts the texel bake too.
+    lit: bool = field(default=True, metadata={"internal": True})
 
 
 @dataclass

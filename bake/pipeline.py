@@ -43,6 +43,14 @@ def _import_job(cfg: Config) -> ImportJob:
                      scene=cfg.import_.scene)
 
 
+def _textures_section(cfg: Config):
+    """The textures section, told whether the lighting stage will bake into its lightmap atlas."""
+    import dataclasses
+
+    lit = cfg.lighting.enabled and cfg.lighting.target == "lightmap"
+    return dataclasses.replace(cfg.textures, lightmap=dataclasses.replace(cfg.textures.lightmap, lit=lit))
+
+
 def _always(_: Config) -> bool:
     return True
 
@@ -55,7 +63,7 @@ STAGES: tuple[StageSpec, ...] = (
               lambda c: c.mesh.clean.enabled, "mesh.clean.enabled"),
     StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify,
               lambda c: c.mesh.simplify.enabled, "mesh.simplify.enabled"),
-    StageSpec("textures", "bake.textures.stage:stage", lambda c: c.textures,
+    StageSpec("textures", "bake.textures.stage:stage", _textures_section,
               lambda c: c.textures.enabled, "textures.enabled"),
     StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting,
               lambda c: c.lighting.enabled, "lighting.enabled"),

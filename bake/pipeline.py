@@ -15,6 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from . import advice
 from . import config as config_mod
 from .config import Config, ImportJob
 from .errors import BakeError, ConfigError, InputError, StageError
@@ -139,6 +140,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             rec.counts_in = counts_in
         if not rec.counts_out:
             rec.counts_out = counts(scene)
+        advice.after_stage(spec.name, cfg, scene, rec, records)
         records.append(rec)
         if observe is not None:
             observe(spec.name, scene)

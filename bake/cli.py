@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 import traceback
 from pathlib import Path
 from typing import Any, Callable
@@ -240,7 +241,18 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         reference = rvals[0]
     out_dir = Path(args.out) if args.out else _default_out(target)
     out = out_dir / "sweeps" / key
-    table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out)
+    from .export import output
+
+    output.check_paths(out_dir)
+    if out_dir.is_dir() and (out_dir / "sweeps").exists():
+        output.check_paths(out_dir / "sweeps", label="--out (sweeps/)")
+    t0 = time.perf_counter()
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"bake sweep [{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out, progress=progress)
     html_written = False
     if (out_dir / "report.json").is_file() and cfg.report.html:  # show it in the bake's report
         from .export import html

@@ -232,3 +232,33 @@ def test_read_only_output_folder_exits_2_naming_the_folder(tmp_path):
     assert "read-only" in one_error_line(r, 2, out)
     r = bake_subprocess(["run", model, "--out", out / "sub"], prefix=prefix)
     assert "read-only" in one_error_line(r, 2, out)
+
+
+# --------------------------------------------------------------------------- bake sweep (issue 18, item 8)
+def test_sweep_shows_progress_as_it_goes_and_a_readable_header(tmp_path):
+    import time as _time
+    model = grid_obj(tmp_path / "grid.obj", 12)
+    proc = subprocess.Popen([sys.executable, "-m", "bake.cli", "sweep", str(model), "--vary",
+                             "export.precision=2,3,4", "--out", str(tmp_path / "o")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = _time.perf_counter()
+    arrivals = []
+    for line in proc.stderr:  # read as the lines come
+        arrivals.append((_time.perf_counter() - t0, line.rstrip("\n")))
+    out = proc.stdout.read()
+    proc.wait(timeout=300)
+    end = _time.perf_counter() - t0
+    assert proc.returncode == 0, arrivals
+    msgs = [m for _, m in arrivals]
+    bakes = [m for m in msgs if "bake " in m and "/3:" in m]
+    assert [b.split("] ", 1)[1] for b in bakes] == [f"bake {i}/3: export.precision = {v}"
+                                                   for i, v in ((1, 2), (2, 3), (3, 4))], msgs
+    assert any("warm-up" in m for m in msgs) and any("comparing" in m for m in msgs), msgs
+    assert arrivals[0][0] < end / 2, (arrivals, end)  # the first line came early, not at the end
+    header = out.splitlines()[0]
+    assert header == "sweep export.precision: reference = the bake at the highest value (4)", header
+    assert "{" not in out, out
+    # --quiet: nothing on stderr
+    r = subprocess.run([sys.executable, "-m", "bake.cli", "sweep", str(model), "--vary", "export.precision=2,3",
+                        "--out", str(tmp_path / "o"), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)

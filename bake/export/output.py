@@ -31,12 +31,12 @@ def _inside(path: Path, folder: Path) -> bool:
 
 
 def check_paths(out_dir: Path, *, depfile: Path | None = None, inputs: Iterable[Path] = (),
-                names: Iterable[str] = ()) -> None:
+                names: Iterable[str] = (), label: str = "--out") -> None:
     """Before baking: every output path given on the command line can be written, exit 2 naming
     the path otherwise. ``inputs``: files the bake will read (model, config, ``export.into``);
     ``names``: output names known before the bake (reports, lists.json, the .sb3/.sprite3)."""
     out_dir = Path(out_dir)
-    check_writable_folder(out_dir, "--out")
+    check_writable_folder(out_dir, label)
     for sub in ("lists", "assets"):  # folders of ours that already exist must take new files too
         if (out_dir / sub).is_dir():
             check_writable_folder(out_dir / sub, f"--out ({sub}/)")

@@ -304,11 +304,63 @@ def load_sweeps(out_dir: Path) -> list[dict]:
     return out
 
 
-def _sweeps_section(sweeps: list[dict]) -> str:
+def sweep_hint(report: dict, out_dir: Path) -> str:
+    """A ``bake sweep`` command that works for this bake: the bake's own config or model, a key of
+    a stage that ran (with values around the one used), and this folder."""
+    import shlex
+
+    cfg = report.get("config", {})
+    ran = {s.get("name") for s in report.get("stages", [])}
+    inp = report.get("input", {})
+    target = inp.get("config") or inp.get("path") or "MODEL"
+    from_config = bool(inp.get("config"))
+    sets: list[str] = []
+
+    def around(v: float, whole: bool) -> str:
+        vals = [v / 4, v / 2, v] + ([v * 2] if not whole or v * 2 <= 1e9 else [])
+        if not whole:
+            vals = [x for x in vals if x <= 1.0] if v <= 1.0 else vals
+            return ",".join(f"{x:.3g}" for x in vals)
+        return ",".join(str(max(1, int(round(x)))) for x in dict.fromkeys(vals))
+
+    simp = cfg.get("mesh", {}).get("simplify", {})
+    light = cfg.get("lighting", {})
+    if "simplify" in ran and simp.get("target_triangles", 0) > 0:
+        vary = f"mesh.simplify.target_triangles={around(simp['target_triangles'], True)}"
+    elif "simplify" in ran and simp.get("target_ratio", 0) > 0:
+        vary = f"mesh.simplify.target_ratio={around(simp['target_ratio'], False)}"
+    elif "simplify" in ran and simp.get("max_error", 0) > 0:
+        vary = f"mesh.simplify.max_error={around(simp['max_error'], False)}"
+    elif "lighting" in ran and light.get("ao", {}).get("enabled"):
+        vary = "lighting.ao.samples=16,64,256"
+    elif "lighting" in ran and light.get("lights"):
+        vary = "lighting.shadows.samples=1,4,16,64"
+    elif "bsp" in ran:
+        vary = "bsp.candidates=4,16,64"
+    elif "bvh" in ran:
+        vary = "bvh.leaf_size=1,2,4,8"
+    else:
+        vary = "export.precision=2,3,4,5"
+    if not from_config:  # a model baked with --set: switch the swept stage on again
+        stage_switch = {"mesh.simplify.": ["mesh.simplify.enabled=true"],
+                        "lighting.ao.": ["lighting.enabled=true", "lighting.ao.enabled=true"],
+                        "lighting.": ["lighting.enabled=true"], "bsp.": ["bsp.enabled=true"],
+                        "bvh.": ["bvh.enabled=true"]}
+        for prefix, sw in stage_switch.items():
+            if vary.startswith(prefix):
+                sets = sw
+                break
+    parts = ["bake", "sweep", str(target)] + [x for s in sets for x in ("--set", s)] + ["--vary", vary,
+                                                                                        "--out", str(out_dir)]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def _sweeps_section(sweeps: list[dict], report: dict | None = None, out_dir: Path | None = None) -> str:
     if not sweeps:
-        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. Run for example <code>bake sweep "
-                "MODEL --vary mesh.simplify.target_ratio=0.02,0.1,0.5 --out THIS_FOLDER</code> "
-                "(any numeric key: <code>bake keys</code>) and the table and plot appear here.</p>")
+        cmd = sweep_hint(report or {}, out_dir or Path("THIS_FOLDER"))
+        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. Run for example "
+                f"<code>{_esc(cmd)}</code> (any numeric key of a stage that runs: <code>bake keys</code>) "
+                "and the table and plot appear here.</p>")
     parts = ["<h2>Accuracy against time</h2>"]
     for sw in sweeps:
         t = sw["table"]
@@ -373,7 +425,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
         why = (f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
-    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps)]
+    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps, report, out_dir)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
             f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"
             f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "

@@ -512,6 +512,11 @@ class _Where:
                     found = i
         return found
 
+    def is_header(self, key: str) -> bool:
+        """Whether ``key`` is written as a ``[table]`` (or ``[[table]]``) header in the file."""
+        line = self.line_of(key)
+        return line is not None and self.lines[line - 1].strip().startswith("[")
+
     def error(self, key: str, msg: str) -> ConfigError:
         if self.origin != "file":
             return ConfigError(f"{msg} (from {self.origin} on the command line)", key=key)
@@ -593,7 +598,9 @@ def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) 
             known = all_keys(Config)
             sub = [k for k in known if k.startswith(prefix)] if prefix else known
             leaves = _leaves(value, key) if isinstance(value, dict) else [key]
-            if len(leaves) != 1:  # a table of several keys: mend the table's name
+            # a [table] header in the file, or a table of several keys: mend the table's name;
+            # a dotted key (--set lightning.enabled=true): mend the whole key
+            if len(leaves) != 1 or (isinstance(value, dict) and where.is_header(key)):
                 raise where.error(key, f"unknown table [{key}]" + _suggest(key, sub or known, table=True))
             raise where.error(leaves[0], "unknown key" + _suggest(leaves[0], known))
         t = hints[attr]

@@ -157,7 +157,11 @@ def test_typo_suggestions_in_files_name_tables(tmp_path):
     p.write_text("[lightning]\nenabled = true\n")
     with pytest.raises(ConfigError) as e:
         config.load(p)
-    assert e.value.line == 2 and "did you mean 'lighting.enabled'?" in str(e.value), str(e.value)
+    assert e.value.line == 1 and "did you mean [lighting]?" in str(e.value), str(e.value)
+    p.write_text("lightning.enabled = true\n")  # a dotted key: the whole key is mended
+    with pytest.raises(ConfigError) as e:
+        config.load(p)
+    assert e.value.line == 1 and "did you mean 'lighting.enabled'?" in str(e.value), str(e.value)
 
 
 def test_sweep_of_an_unknown_key_says_unknown_with_a_suggestion(tmp_path):

@@ -304,9 +304,10 @@ def load_sweeps(out_dir: Path) -> list[dict]:
     return out
 
 
-def sweep_hint(report: dict, out_dir: Path) -> str:
-    """A ``bake sweep`` command that works for this bake: the bake's own config or model, a key of
-    a stage that ran (with values around the one used), and this folder."""
+def sweep_hint(report: dict) -> str:
+    """A ``bake sweep`` command that works for this bake, run in its output folder: the bake's own
+    config or model (absolute paths), a key of a stage that ran (with values around the one used),
+    and ``--out .`` (so the page does not depend on where the folder is)."""
     import shlex
 
     cfg = report.get("config", {})
@@ -351,14 +352,14 @@ def sweep_hint(report: dict, out_dir: Path) -> str:
                 sets = sw
                 break
     parts = ["bake", "sweep", str(target)] + [x for s in sets for x in ("--set", s)] + ["--vary", vary,
-                                                                                        "--out", str(out_dir)]
+                                                                                        "--out", "."]
     return " ".join(shlex.quote(p) for p in parts)
 
 
-def _sweeps_section(sweeps: list[dict], report: dict | None = None, out_dir: Path | None = None) -> str:
+def _sweeps_section(sweeps: list[dict], report: dict | None = None) -> str:
     if not sweeps:
-        cmd = sweep_hint(report or {}, out_dir or Path("THIS_FOLDER"))
-        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. Run for example "
+        cmd = sweep_hint(report or {})
+        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. In this folder run for example "
                 f"<code>{_esc(cmd)}</code> (any numeric key of a stage that runs: <code>bake keys</code>) "
                 "and the table and plot appear here.</p>")
     parts = ["<h2>Accuracy against time</h2>"]
@@ -425,7 +426,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
         why = (f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
-    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps, report, out_dir)]
+    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps, report)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
             f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"
             f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "

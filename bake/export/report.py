@@ -158,7 +158,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         acc = " ".join(f"{k}={100 * v:.3g}%" if k.startswith("hausdorff") else f"{k}={v:.3g}" for k, v in nums.items())
         if any(k.startswith("hausdorff") for k in nums):
             acc += " (Hausdorff distances in % of the bounding-box diagonal)"
-        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}")
+        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip())
         for w in st["warnings"]:
             lines.append(f"    warning: {w}")
     total = sum(v["bytes"] for v in report["lists"].values())

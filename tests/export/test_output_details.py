@@ -139,14 +139,14 @@ def test_report_html_sweep_hint_works_for_the_bake_at_hand(tmp_path, capsys):
         out = tmp_path / name
         assert run(capsys, "run", tmp_path / "t.obj", "--out", out, "--quiet", *sets)[0] == 0
         page = (out / "report.html").read_text()
-        m = re.search(r"No sweep yet\. Run for example <code>([^<]+)</code>", page)
+        m = re.search(r"No sweep yet\. In this folder run for example <code>([^<]+)</code>", page)
         assert m, "no hint"
         import html as html_mod
         argv = shlex.split(html_mod.unescape(m.group(1)))
-        assert argv[:2] == ["bake", "sweep"] and argv[-2:] == ["--out", str(out)], argv
+        assert argv[:2] == ["bake", "sweep"] and argv[-2:] == ["--out", "."], argv
         if name == "simplified":
             assert any(a.startswith("mesh.simplify.target_triangles=") for a in argv), argv
         r = subprocess.run([sys.executable, "-m", "bake.cli", *argv[1:], "--quiet"], capture_output=True,
-                           text=True, timeout=600)
+                           text=True, timeout=600, cwd=out)
         assert r.returncode == 0, (argv, r.stderr)
         assert "alt='sweep " in (out / "report.html").read_text()  # and the report shows it

@@ -262,3 +262,25 @@ def test_sweep_shows_progress_as_it_goes_and_a_readable_header(tmp_path):
     r = subprocess.run([sys.executable, "-m", "bake.cli", "sweep", str(model), "--vary", "export.precision=2,3",
                         "--out", str(tmp_path / "o"), "--quiet"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)
+
+
+# --------------------------------------------------------------------------- README (issue 18, item 9)
+def test_readme_worked_example_is_what_a_run_prints(tmp_path):
+    """README's Suzanne example, run for real: the same lines but for the times."""
+    import re
+    from pathlib import Path
+
+    from conftest import corpus_path
+
+    model = corpus_path("suzanne_obj", "suzanne.obj")
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    cmd = re.search(r"```sh\n\.venv/bin/bake (run \S+suzanne\.obj --out (\S+))\n```", readme)
+    shown = re.search(r"```\n(suzanne\.obj: .*?)```", readme, re.S).group(1)
+    assert cmd, "the example's command is not in README.md"
+    r = subprocess.run([sys.executable, "-m", "bake.cli", "run", str(model), "--out", cmd.group(2)],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+
+    def masked(text):
+        return [re.sub(r"\d+\.\d+ s\b", "# s", ln) for ln in text.strip().splitlines()]
+    assert masked(r.stdout) == masked(shown)

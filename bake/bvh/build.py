@@ -85,11 +85,13 @@ def half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0]
 
 
-def sah_cost(bvh: BVH, c_trav: float = 1.0, c_int: float = 1.0) -> float:
-    """The tinybvh SAH cost of the tree (see module doc). 0 for an empty tree."""
+def sah_cost(bvh: BVH, c_trav: float = 1.0, c_int: float = 1.0, *, lo: np.ndarray | None = None,
+             hi: np.ndarray | None = None) -> float:
+    """The tinybvh SAH cost of the tree (see module doc). 0 for an empty tree. ``lo``/``hi``
+    (N, 3) replace the node boxes (e.g. the boxes as the lists write them, rounded outward)."""
     if bvh.n_nodes == 0:
         return 0.0
-    a = half_area(bvh.lo, bvh.hi)
+    a = half_area(bvh.lo if lo is None else lo, bvh.hi if hi is None else hi)
     leaf = bvh.is_leaf
     root = a[0]
     total = c_trav * a[~leaf].sum() + c_int * (a[leaf] * bvh.count[leaf]).sum()

@@ -147,7 +147,7 @@ class BVHConfig:
     quant_bits: int = 6  # bits per quantised box plane (2..8)
     # list coordinates are rounded to a power of ten <= diagonal * 10^-precision (0 = exact)
     precision: int = 5
-    high_seconds: float = 20.0  # time budget of the reinsertion optimiser (quality = "high")
+    high_effort: float = 10.0  # work budget of the reinsertion optimiser (quality = "high"), millions of node visits
     list_prefix: str = "bvh"  # lists are "<prefix> nodes", "<prefix> tris", "<prefix> tri ids"
 
 

@@ -83,7 +83,7 @@ def model_figures(name, scene, a) -> dict:
             if q == "high" and a.quick:
                 continue
             bvh, w, c = timed(lambda: B.build(lo, hi, leaf_size=4, bins=8, quality=q,
-                                              high_seconds=a.high_seconds, ids=keep))
+                                              high_effort=a.high_effort, ids=keep))
             if q not in best or w < best[q][1]:
                 best[q] = (bvh, w, c)
     for q, (bvh, w, c) in best.items():
@@ -164,7 +164,7 @@ def main() -> None:
     ap.add_argument("--sweep-rays", type=int, default=20_000)
     ap.add_argument("--brute-pairs", type=float, default=6e8)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--high-seconds", type=float, default=20.0)
+    ap.add_argument("--high-effort", type=float, default=10.0)
     ap.add_argument("--quick", action="store_true", help="no high-quality builds, no sweeps")
     ap.add_argument("--only", nargs="*", help="model names")
     a = ap.parse_args()

@@ -32,7 +32,7 @@ def _check(cfg: BVHConfig) -> None:
     need(2 <= cfg.bins <= 256, "bins", "must be between 2 and 256")
     need(2 <= cfg.quant_bits <= 8, "quant_bits", "must be between 2 and 8")
     need(0 <= cfg.precision <= 15, "precision", "must be between 0 (exact) and 15")
-    need(cfg.high_seconds >= 0, "high_seconds", "must be >= 0")
+    need(cfg.high_effort >= 0, "high_effort", "must be >= 0")
     need(bool(cfg.list_prefix.strip()), "list_prefix", "must not be empty")
 
 
@@ -77,7 +77,7 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     hi = tq[keep].max(axis=1) if len(keep) else np.zeros((0, 3))
     tb = time.perf_counter()
     bvh = build_mod.build(lo, hi, leaf_size=cfg.leaf_size, bins=cfg.bins, quality=cfg.quality,
-                          high_seconds=cfg.high_seconds, ids=keep)
+                          high_effort=cfg.high_effort, ids=keep)
     build_s = time.perf_counter() - tb
     te = time.perf_counter()
     enc = encode(bvh, tq, np.arange(1, T + 1, dtype=np.int64), cfg.layout, d=d, pad=pad,

@@ -9,6 +9,7 @@ can be dropped into any project with "Upload Sprite".
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from . import sb3
 from . import readers
+from . import textimage
 
 
 def _cfg(cfg: Any, key: str, default: Any) -> Any:
@@ -68,17 +70,28 @@ def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
                            tris=names["tris"], ids=names["ids"])
 
 
+def has_textimage(values: dict[str, list]) -> bool:
+    """Did the bake write a TextImage string (a list item starting with the TextImage magic)?"""
+    return any(len(items) and isinstance(items[0], str) and items[0].startswith(textimage.MAGIC + ",")
+               for items in values.values())
+
+
 def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.ReaderSpec:
-    """What the reader can read in these lists."""
+    """The reader for these lists: only the blocks whose lists the bake wrote (a renderer for a
+    mesh, the BSP walk for a BSP tree, the ray query for the BVH layout written, the TextImage
+    decoder for TextImage strings)."""
     n = cfg.names
     mesh = None
     if n.vertices in values and n.triangles in values:
         mesh = readers.MeshNames(verts=n.vertices, tris=n.triangles,
                                  mat_colors=n.materials if n.materials in values else None,
-                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None)
+                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None,
+                                 two_sided=getattr(n, "two_sided", "mat two-sided"))
     cam = auto_camera(values[n.vertices]) if mesh else readers.Camera()
+    two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
     return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),
-                              textimage=True, renderer=True, camera=cam)
+                              textimage=has_textimage(values), renderer=True, camera=cam, two_sided=two,
+                              bounds=readers.bounding_sphere(values[n.vertices]) if mesh else None)
 
 
 def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
@@ -88,8 +101,7 @@ def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
     nodes, planes = art.get("nodes", "bsp nodes"), art.get("planes", "bsp planes")
     if nodes not in values or planes not in values:
         return None
-    return readers.BSPSpec(nodes=nodes, planes=planes,
-                           two_sided=[1 if getattr(m, "double_sided", False) else 0 for m in scene.materials])
+    return readers.BSPSpec(nodes=nodes, planes=planes)
 
 
 def texture_costumes(scene: Any) -> list[sb3.Costume]:
@@ -128,8 +140,10 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         details["sb3_assets"] = sb3.archive_sizes(data)["assets"]
     if cfg.sprite3:
         if spec is not None:
-            # no green-flag script: a sprite dropped into an engine must not start drawing on its own
-            sprite = readers.reader_target(spec, cfg.sprite_name, local_lists=values)
+            # no green-flag script: a sprite dropped into an engine must not start drawing on its own;
+            # with `load triangle` for authors who copy blocks into their engines
+            sprite = readers.reader_target(dataclasses.replace(spec, helpers=True), cfg.sprite_name,
+                                           local_lists=values)
         else:
             sprite = sb3.Target(cfg.sprite_name, lists=values)
         if costumes:
@@ -153,7 +167,8 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                     record.warn("export.into_reader needs export.into_target = \"Stage\" "
                                 "(a sprite cannot read another sprite's lists): reader not added")
             else:
-                sprites.append(readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values)))
+                sprites.append(readers.reader_target(dataclasses.replace(spec, helpers=True), cfg.sprite_name,
+                                                     stage_lists=list(values)))
         data = sb3.merge_into(src, target, values, costumes, sprites=sprites)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)

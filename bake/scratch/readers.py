@@ -135,6 +135,8 @@ class ReaderSpec:
     camera: Camera = field(default_factory=Camera)
     cull_backfaces: bool = False
     pen_size: float = 2.0
+    loader: Any = None  # a bake.scratch.loader.LoaderSpec: unpack packed lists at the green flag
+
 
     def lists_read(self) -> list[str]:
         """The data lists the blocks read (they must exist in the project)."""
@@ -146,6 +148,8 @@ class ReaderSpec:
             out += [self.bvh.nodes, self.bvh.tris, self.bvh.ids]
         if self.bsp and self.mesh:
             out += [self.bsp.nodes, self.bsp.planes]
+        if self.loader:
+            out += [self.loader.packed]
         return out
 
 
@@ -923,6 +927,10 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         _bvh_blocks(r)
     if spec.textimage:
         _textimage_blocks(r)
+    if spec.loader:
+        from . import loader
+
+        loader.add_loader(r, spec.loader)
     all_local = dict(local_lists)
     for k, v in r.local_lists.items():
         if k in all_local:
@@ -932,12 +940,15 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
     b = B.Builder(scope)
     for proccode, args, body in r.procs:
         b.define(proccode, args, body)
+    unpack = [B.call("unpack lists")] if spec.loader else []
     if demo and spec.mesh and spec.renderer:
         cam = spec.camera
-        b.when_flag([B.call("set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch),
-                     B.call("render")])
+        draw = [B.call("set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch), B.call("render")]
+        b.when_flag(unpack + ([B.if_(eq(var("unpack error"), ""), draw)] if unpack else draw))
+    elif unpack:
+        b.when_flag(unpack)
     costumes = []
-    if spec.textimage:
+    if spec.textimage or spec.loader:
         asset = sb3.Asset(EMPTY_SVG, "svg")
         costumes = [sb3.Costume(ch, asset, 1, (1.0, 1.0)) for ch in ALPHABET]
     return sb3.Target(name, lists=all_local, variables=dict(r.vars), costumes=costumes,

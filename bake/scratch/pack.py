@@ -1,0 +1,551 @@
+"""Packed lists: numeric Scratch lists as short strings that the project decodes at the green flag.
+
+A list in project.json is a JSON array of decimal numbers: about 3.3 bits per byte. A packed list
+is one string of printable ASCII, about 6.5 bits per byte, and the values inside it are coded by
+what they are (deltas, palette indices, first-use vertex indices, constants), so a list takes a
+fraction of its bytes. The loader blocks (``bake/scratch/loader.py``) rebuild exactly the plain
+list, item for item; :func:`unpack` here is their Python mirror, step for step, and counts the
+blocks the real VM executes (tests/scratch/test_pack_vm.py proves both in scratch-vm).
+
+Format (version 1; docs/formats.md "Packed lists")
+-------------------------------------------------
+
+Symbols are the 92 characters ``!`` .. ``~`` without ``"`` and ``\\`` (they cost two bytes in
+JSON); a symbol's value is its place in :data:`ALPHABET` (0..91). Numbers are *varints* with a
+parameter ``T`` (1..91): symbols below ``T`` end a number, symbols ``T`` and up are continuation
+digits (base ``C = 92 - T``, bijective), so ``n`` is one symbol when ``n < T``, two when
+``n < T*(C + 1)`` and so on. Reading: ``a = 0; s = next; while s >= T: a = a*C + s - T + 1;
+s = next; n = a*T + s``.
+
+A packed list is the text ``sbpk1`` followed by varints with ``T = 46`` (the header):
+
+==================  ========================================================================
+field               meaning
+==================  ========================================================================
+crc                 CRC-32 of the list name (UTF-8) and everything after this field
+name length, name   the list's name (UTF-16 units, then the characters as they are)
+rows, stride        the list has ``rows * stride`` items, ``stride`` columns
+per column          ``mode`` then its parameters (below)
+==================  ========================================================================
+
+Column modes (every value is an integer ``q``; the item is ``q / 10^d``, exact in double
+precision because both are whole numbers below 2^53, so it is the same number the plain list's
+decimal text reads as):
+
+=======  =========  ====================================================  ======================
+mode     name       parameters                                            item from the code n
+=======  =========  ====================================================  ======================
+0        const      d, zigzag(q)                                          q / 10^d (no code)
+1        offset     T, d, zigzag(q0)                                      (q0 + n) / 10^d
+2        delta      T, d                                                  acc += unzigzag(n);
+                                                                          acc / 10^d
+3        index      T                                                     n = 0: m += 1, m;
+                                                                          else m + 1 - n
+4        palette    T, d, P, P times zigzag(q)                            palette[n + 1] / 10^d
+=======  =========  ====================================================  ======================
+
+``zigzag(q) = 2q`` for ``q >= 0``, ``-2q - 1`` below. ``m`` (the highest index so far) is shared
+by a list's index columns: with vertices numbered in the order the triangles first use them, a
+new vertex costs one symbol and a recent one a few. After the header come the codes row by row
+(columns in order; const columns have none), then the sum of all codes (a varint with
+``T = 46``). The loader checks the sum and that the text ended exactly there; :func:`unpack`
+also checks the CRC, so an edited or truncated string is an error naming the list.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+ALPHABET = "".join(chr(c) for c in range(33, 127) if chr(c) not in '"\\')
+BASE = len(ALPHABET)  # 92
+MAGIC = "sbpk1"
+HEADER_T = 46
+CONST, OFFSET, DELTA, INDEX, PALETTE = range(5)
+MODE_NAMES = ("const", "offset", "delta", "index", "palette")
+MAX_DECIMALS = 15
+MAX_Q = 2 ** 53  # integers above this are not exact doubles
+_SYM = {ch: i for i, ch in enumerate(ALPHABET)}
+_SYM_ARRAY = np.full(128, -1, np.int64)
+for _i, _ch in enumerate(ALPHABET):
+    _SYM_ARRAY[ord(_ch)] = _i
+
+
+class PackError(ValueError):
+    """A packed list that cannot be decoded (truncated, edited, not ours); names the list."""
+
+    def __init__(self, name: str, message: str):
+        super().__init__(f"packed list '{name}': {message}")
+        self.list_name = name
+
+
+def costume_symbols() -> list[int]:
+    """Symbol value of each of the reader's 94 alphabet costumes ``!`` .. ``~`` (costume k is
+    ``chr(32 + k)``); ``"`` and ``\\`` are not symbols and read as 0 (the sum check catches them)."""
+    return [_SYM.get(chr(32 + k), 0) for k in range(1, 95)]
+
+
+# --------------------------------------------------------------------------- varints
+def zigzag(q: np.ndarray) -> np.ndarray:
+    q = np.asarray(q, np.int64)
+    return np.where(q >= 0, 2 * q, -2 * q - 1)
+
+
+def unzigzag(n: int) -> int:
+    return n // 2 if n % 2 == 0 else -(n + 1) // 2
+
+
+def varint_lengths(n: np.ndarray, T: int) -> np.ndarray:
+    """Symbols each value of ``n`` (>= 0) takes as a varint with parameter ``T``."""
+    n = np.asarray(n, np.int64)
+    C = BASE - T
+    acc = n // T
+    if C == 1:
+        return 1 + acc
+    # acc needs k continuation digits when acc <= C + C^2 + ... + C^k (bijective base C)
+    limits = []
+    total, power = 0, 1
+    while total < (1 << 62):
+        power *= C
+        total += power
+        limits.append(min(total, (1 << 63) - 1))
+    k = np.searchsorted(np.array(limits, np.int64), acc, side="left").astype(np.int64) + 1
+    return 1 + np.where(acc > 0, k, 0)
+
+
+def best_t(n: np.ndarray) -> tuple[int, int]:
+    """The varint parameter that codes ``n`` in the fewest symbols: (T, symbols)."""
+    n = np.asarray(n, np.int64)
+    if n.size == 0:
+        return HEADER_T, 0
+    vals, counts = np.unique(n, return_counts=True)
+    best = None
+    for T in range(1, BASE):
+        if BASE - T == 1 and int(vals[-1]) // T > 1000:
+            continue
+        size = int((varint_lengths(vals, T) * counts).sum())
+        if best is None or size < best[1]:
+            best = (T, size)
+    return best
+
+
+def encode_varints(n: np.ndarray, T: int) -> list[np.ndarray]:
+    """The symbols of each value (a list of int arrays would be slow: returns a (N, k) array
+    padded with -1 and the lengths), as ``[table, lengths]``."""
+    n = np.asarray(n, np.int64)
+    C = BASE - T
+    acc, term = np.divmod(n, T)
+    digits = []
+    a = acc.copy()
+    while (a > 0).any():
+        live = a > 0
+        a1 = np.where(live, a - 1, 0)
+        d = np.where(live, a1 % C, -1)
+        a = np.where(live, a1 // C, 0)
+        digits.append(d)
+    k = len(digits)
+    table = np.full((len(n), k + 1), -1, np.int64)
+    for j, d in enumerate(digits):  # digits come least significant first: write them backwards
+        table[:, k - 1 - j] = np.where(d >= 0, d + T, -1)
+    table[:, k] = term
+    return [table, (table >= 0).sum(axis=1)]
+
+
+def varint_text(values: Sequence[int], T: int = HEADER_T) -> str:
+    if not len(values):
+        return ""
+    table, _ = encode_varints(np.array([int(v) for v in values], np.int64), T)
+    flat = table.ravel()
+    return "".join(ALPHABET[s] for s in flat[flat >= 0].tolist())
+
+
+# --------------------------------------------------------------------------- columns
+@dataclass
+class Column:
+    """A group of ``width`` adjacent columns coded one way (width > 1 only for index mode)."""
+
+    mode: int
+    decimals: int = 0
+    T: int = HEADER_T
+    q0: int = 0  # const value or offset
+    palette: list[int] = field(default_factory=list)
+    codes: np.ndarray | None = None  # data codes, row-major within the group (None for const)
+    symbols: int = 0  # data symbols
+    width: int = 1
+
+    def header(self) -> list[int]:
+        """The group's header fields (varints with T = 46): mode, width, T, decimals,
+        zigzag(q0), palette size, the palette (zigzag)."""
+        pal = [int(z) for z in zigzag(np.array(self.palette, np.int64))] if self.palette else []
+        return [self.mode, self.width, self.T if self.mode != CONST else 1, self.decimals,
+                int(zigzag(np.array([self.q0]))[0]), len(pal), *pal]
+
+    def header_symbols(self) -> int:
+        return int(varint_lengths(np.array(self.header(), np.int64), HEADER_T).sum())
+
+    def cost(self) -> int:
+        return self.symbols + self.header_symbols()
+
+
+def decimals_of(values: np.ndarray) -> tuple[int, np.ndarray] | None:
+    """The fewest decimals ``d`` with every value exactly ``q / 10^d`` for integers ``q`` below
+    2^53 (the same double a JSON reader makes of the plain list's text), and those ``q``."""
+    v = np.asarray(values, np.float64)
+    if v.size == 0:
+        return 0, np.zeros(0, np.int64)
+    if not np.isfinite(v).all():
+        return None
+    for d in range(MAX_DECIMALS + 1):
+        f = float(10 ** d)
+        with np.errstate(over="ignore", invalid="ignore"):
+            q = np.rint(v * f)
+        if not (np.abs(q) < MAX_Q).all():
+            return None
+        if np.array_equal(q / f, v):
+            return d, q.astype(np.int64)
+    return None
+
+
+def column_choices(q: np.ndarray, decimals: int, allow_palette: bool = True) -> list[Column]:
+    """Every way to code one column (const when all values agree; else offset, delta, palette)."""
+    out: list[Column] = []
+    if q.size == 0 or (q == q[0]).all():
+        return [Column(CONST, decimals, q0=int(q[0]) if q.size else 0, codes=None, symbols=0)]
+    lo = int(q.min())
+    codes = q - lo
+    T, size = best_t(codes)
+    out.append(Column(OFFSET, decimals, T, q0=lo, codes=codes, symbols=size))
+    codes = zigzag(np.diff(q, prepend=0))
+    T, size = best_t(codes)
+    out.append(Column(DELTA, decimals, T, codes=codes, symbols=size))
+    if allow_palette:
+        vals, inv, counts = np.unique(q, return_inverse=True, return_counts=True)
+        if len(vals) <= max(1, q.size // 2):
+            order = np.lexsort((vals, -counts))  # most frequent first (ties: smaller value)
+            rank = np.empty(len(vals), np.int64)
+            rank[order] = np.arange(len(vals))
+            codes = rank[inv.ravel()]
+            T, size = best_t(codes)
+            out.append(Column(PALETTE, decimals, T, palette=[int(x) for x in vals[order]], codes=codes,
+                              symbols=size))
+    return out
+
+
+def index_codes(v: np.ndarray) -> np.ndarray | None:
+    """Codes of 1-based indices in first-use order (None if an index skips ahead)."""
+    v = np.asarray(v, np.int64)
+    if v.size == 0:
+        return v
+    prev = np.concatenate([[0], np.maximum.accumulate(v)[:-1]])
+    if (v > prev + 1).any() or (v < 1).any():
+        return None
+    return np.where(v == prev + 1, 0, prev - v + 1)
+
+
+# --------------------------------------------------------------------------- packing
+@dataclass
+class Packed:
+    """One packed list."""
+
+    name: str
+    text: str
+    rows: int
+    stride: int
+    columns: list[Column]  # the column groups, left to right
+    items: int
+
+    @property
+    def chars(self) -> int:
+        return len(self.text)
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [{"mode": MODE_NAMES[c.mode], "columns": c.width, "T": c.T if c.mode != CONST else None,
+                 "decimals": c.decimals, "symbols": c.symbols,
+                 **({"palette": len(c.palette)} if c.mode == PALETTE else {})} for c in self.columns]
+
+
+def _utf16_len(s: str) -> int:
+    return len(s.encode("utf-16-le")) // 2
+
+
+def pack(name: str, values: Sequence[Any], stride: int = 1, *, index_columns: Sequence[int] = (),
+         modes: dict[int, int] | None = None) -> Packed | None:
+    """Pack a numeric list (the items as a JSON reader reads the plain list: ints and floats).
+
+    ``index_columns``: adjacent columns holding 1-based indices in first-use order (coded as one
+    index group when that is shorter). ``modes``: force a mode per column (benchmarks). Returns
+    None when the list cannot be packed exactly (strings, non-decimal floats, ints past 2^53)."""
+    items = list(values)
+    if any(isinstance(x, (str, bool)) or x is None for x in items):
+        return None
+    n = len(items)
+    S = stride if stride and stride > 0 and n % stride == 0 and n else 1
+    R = n // S
+    if any(isinstance(x, int) and abs(x) >= MAX_Q for x in items):
+        return None
+    arr = np.asarray(items, np.float64) if n else np.zeros(0)
+    if n and not np.isfinite(arr).all():
+        return None
+    grid = arr.reshape(R, S)
+    qs = []
+    for c in range(S):
+        dq = decimals_of(grid[:, c])
+        if dq is None:
+            return None
+        qs.append(dq)
+    singles: list[Column] = []
+    for c in range(S):
+        d, q = qs[c]
+        choices = column_choices(q, d)
+        if modes and c in modes:
+            choices = [ch for ch in choices if ch.mode == modes[c]] or choices
+        singles.append(min(choices, key=lambda ch: (ch.cost(), ch.mode)))
+    groups: list[tuple[int, Column]] = [(c, singles[c]) for c in range(S)]  # (first column, group)
+    idx = sorted(set(c for c in index_columns if 0 <= c < S))
+    if idx and R and idx == list(range(idx[0], idx[-1] + 1)) and all(qs[c][0] == 0 for c in idx) \
+            and not (modes and any(c in modes for c in idx)):
+        flat = np.stack([qs[c][1] for c in idx], axis=1).ravel()
+        codes = index_codes(flat)
+        if codes is not None:
+            T, size = best_t(codes)
+            col = Column(INDEX, 0, T, codes=codes, symbols=size, width=len(idx))
+            if col.cost() < sum(singles[c].cost() for c in idx):
+                groups = [(c, g) for c, g in groups if c < idx[0]] + [(idx[0], col)] + \
+                         [(c, g) for c, g in groups if c > idx[-1]]
+    columns = [g for _, g in groups]
+    parts = [varint_text([_utf16_len(name)]) + name + varint_text([R, S])]
+    total = 0
+    alphabet = np.array(list(ALPHABET))
+    for col in columns:  # each group: its header, then its codes
+        parts.append(varint_text(col.header()))
+        if col.mode == CONST or col.codes is None or not len(col.codes):
+            continue
+        table, _ = encode_varints(col.codes, col.T)
+        flat = table.ravel()
+        parts.append("".join(alphabet[flat[flat >= 0]].tolist()))
+        total += int(np.asarray(col.codes).sum())
+    if total >= MAX_Q:
+        return None
+    body = "".join(parts) + varint_text([total])
+    crc = zlib.crc32(name.encode("utf-8") + body.encode("utf-8"))
+    return Packed(name, MAGIC + varint_text([crc]) + body, R, S, columns, n)
+
+
+# --------------------------------------------------------------------------- unpacking
+@dataclass
+class DecodeCost:
+    """What the loader does for one list: the inputs of :func:`bake.scratch.loader.decode_cost`."""
+
+    header_varints: int = 0  # varints read by ``_pk num`` (header fields, palettes, the sum)
+    header_slow: int = 0  # of those, the ones of more than one symbol
+    header_continuation: int = 0  # symbols read after a varint's first
+    body_varints: int = 0  # varints read in the body
+    body_slow: int = 0
+    body_continuation: int = 0
+    header_zigzag: int = 0  # zigzag values decoded in the header (const, offset, palette entries)
+    header_negative: int = 0  # of those, the negative ones
+    body_negative: int = 0  # negative deltas
+    groups: list = field(default_factory=list)  # (mode name, width, new-vertex codes, palette size)
+    rows: int = 0
+    stride: int = 0
+    chars: int = 0
+
+    @property
+    def items(self) -> int:
+        return self.rows * self.stride
+
+
+@dataclass
+class Unpacked:
+    """What :func:`unpack` found: the items and what decoding them costs."""
+
+    name: str
+    items: list
+    rows: int
+    stride: int
+    modes: list[str]
+    chars: int
+    cost: DecodeCost
+
+
+class _Reader:
+    def __init__(self, name: str, text: str, start: int, cost: DecodeCost):
+        self.name, self.text, self.p = name, text, start
+        self.cost = cost
+        self.header = True
+
+    def sym(self) -> int:
+        if self.p >= len(self.text):
+            raise PackError(self.name, f"the text ends too early (at character {self.p + 1})")
+        ch = self.text[self.p]
+        self.p += 1
+        s = _SYM.get(ch, -1)
+        if s < 0:
+            raise PackError(self.name, f"character {ch!r} at {self.p} is not a packed symbol")
+        return s
+
+    def varint(self, T: int) -> int:
+        C = BASE - T
+        a = 0
+        s = self.sym()
+        digits = 0
+        while s >= T:
+            a = a * C + s - T + 1
+            s = self.sym()
+            digits += 1
+            if digits > 12:
+                raise PackError(self.name, f"a number at character {self.p} is too long")
+        if self.header:
+            self.cost.header_varints += 1
+            self.cost.header_slow += digits > 0
+            self.cost.header_continuation += digits
+        else:
+            self.cost.body_varints += 1
+            self.cost.body_slow += digits > 0
+            self.cost.body_continuation += digits
+        return a * T + s
+
+    def bounded(self, T: int, hi: int, what: str, lo: int = 0) -> int:
+        v = self.varint(T)
+        if not lo <= v <= hi:
+            raise PackError(self.name, f"{what} {v} is out of range ({lo}..{hi})")
+        return v
+
+    def zig(self) -> int:
+        n = self.varint(HEADER_T)
+        self.cost.header_zigzag += 1
+        self.cost.header_negative += n % 2
+        return unzigzag(n)
+
+
+def header_name(text: Any) -> str | None:
+    """The list name written in a packed text (None if it is not one)."""
+    if not isinstance(text, str) or not text.startswith(MAGIC):
+        return None
+    try:
+        r = _Reader("?", text, len(MAGIC), DecodeCost())
+        r.varint(HEADER_T)
+        n = r.varint(HEADER_T)
+        u16 = text[r.p:].encode("utf-16-le", errors="surrogatepass")[:2 * n]
+        name = u16.decode("utf-16-le")
+        return name if len(u16) == 2 * n else None
+    except (PackError, UnicodeDecodeError):
+        return None
+
+
+def packed_bytes(name: str, text: str) -> int:
+    """Bytes a packed list adds to project.json: its text as an item of the packed list (with a
+    comma) and its own list, now empty."""
+    from .numbers import project_json_bytes
+
+    return len(json.dumps(text, ensure_ascii=False).encode("utf-8")) + 1 + project_json_bytes(name, "[]")
+
+
+def is_packed(item: Any) -> bool:
+    return isinstance(item, str) and item.startswith(MAGIC)
+
+
+def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -> Unpacked:
+    """Decode a packed list exactly as the loader blocks do; raises :class:`PackError` naming the
+    list for anything that is not a whole, unedited packed list (checked with its CRC)."""
+    label = name or header_name(text) or "?"
+    if not isinstance(text, str) or not text.startswith(MAGIC):
+        raise PackError(label, f"does not start with {MAGIC!r} (not a scratch-bake packed list)")
+    cost = DecodeCost(chars=len(text))
+    r = _Reader(label, text, len(MAGIC), cost)
+    crc = r.varint(HEADER_T)
+    body_start = r.p
+    nlen = r.bounded(HEADER_T, 10_000, "name length")
+    u16 = text[r.p:].encode("utf-16-le", errors="surrogatepass")
+    if len(u16) < 2 * nlen:
+        raise PackError(label, "the text ends inside the name")
+    try:
+        written = u16[:2 * nlen].decode("utf-16-le")
+    except UnicodeDecodeError:
+        raise PackError(label, "the name is cut inside a character") from None
+    r.p += len(written)
+    if name is not None and written != name:
+        raise PackError(label, f"holds the list '{written}'")
+    label = r.name = written
+    try:
+        whole = written.encode("utf-8") + text[body_start:].encode("utf-8")
+    except UnicodeEncodeError:
+        raise PackError(label, "holds characters that are not text") from None
+    if zlib.crc32(whole) != crc:
+        raise PackError(label, "the check sum does not match: the text was truncated or edited")
+    R = r.bounded(HEADER_T, max_items, "row count")
+    S = r.bounded(HEADER_T, 4096, "stride", 1)
+    if R * S > max_items:
+        raise PackError(label, f"{R * S} items is more than {max_items}")
+    groups: list[Column] = []
+    out: list = [None] * (R * S)
+    m = 0
+    total = 0
+    c0 = 0
+    while c0 < S:
+        r.header = True
+        col = Column(r.bounded(HEADER_T, 4, "column mode"))
+        col.width = r.bounded(HEADER_T, S - c0, "width", 1)
+        col.T = r.bounded(HEADER_T, BASE - 1, "T", 1)
+        col.decimals = r.bounded(HEADER_T, MAX_DECIMALS, "decimals")
+        col.q0 = r.zig()
+        P = r.bounded(HEADER_T, len(text), "palette size")
+        col.palette = [r.zig() for _ in range(P)]
+        if col.mode != INDEX and col.width != 1:
+            raise PackError(label, f"a {MODE_NAMES[col.mode]} group {col.width} columns wide")
+        if (col.mode == PALETTE) != (P > 0) and R:
+            raise PackError(label, "a palette where there should be none, or none where there should be one")
+        groups.append(col)
+        r.header = False
+        mode, w, sc = col.mode, col.width, 10 ** col.decimals
+        new = 0
+        if mode == CONST:
+            v = col.q0 if sc == 1 else col.q0 / sc
+            for k in range(c0, R * S, S):
+                out[k] = v
+        elif mode == INDEX:
+            for row in range(R):
+                for j in range(w):
+                    n = r.varint(col.T)
+                    total += n
+                    if n == 0:
+                        m += 1
+                        new += 1
+                        q = m
+                    else:
+                        q = m + 1 - n
+                        if q < 1:
+                            raise PackError(label, f"index code {n} points before the first item")
+                    out[row * S + c0 + j] = q
+        else:
+            acc = 0
+            for k in range(c0, R * S, S):
+                n = r.varint(col.T)
+                total += n
+                if mode == OFFSET:
+                    q = col.q0 + n
+                elif mode == DELTA:
+                    cost.body_negative += n % 2
+                    acc += col.q0 + unzigzag(n)
+                    q = acc
+                else:
+                    if n >= len(col.palette):
+                        raise PackError(label, f"palette code {n} is past the palette ({len(col.palette)})")
+                    q = col.palette[n]
+                if abs(q) >= MAX_Q:
+                    raise PackError(label, "a value is too large to be exact")
+                out[k] = q if sc == 1 else q / sc
+        cost.groups.append((MODE_NAMES[mode], w, new, len(col.palette)))
+        c0 += w
+    r.header = True
+    check = r.varint(HEADER_T)
+    if check != total:
+        raise PackError(label, "the sum of the codes does not match")
+    if r.p != len(text):
+        raise PackError(label, f"{len(text) - r.p} characters left over after the last item")
+    cost.rows, cost.stride = R, S
+    return Unpacked(label, out, R, S, [MODE_NAMES[c.mode] for c in groups], len(text), cost)

@@ -54,6 +54,7 @@ also checks the CRC, so an edited or truncated string is an error naming the lis
 
 from __future__ import annotations
 
+import functools
 import json
 import zlib
 from dataclasses import dataclass, field
@@ -99,6 +100,17 @@ def unzigzag(n: int) -> int:
     return n // 2 if n % 2 == 0 else -(n + 1) // 2
 
 
+@functools.lru_cache(maxsize=None)
+def _limits(C: int) -> np.ndarray:
+    """acc needs k continuation digits when acc <= C + C^2 + ... + C^k (bijective base C)."""
+    out, total, power = [], 0, 1
+    while total < (1 << 62):
+        power *= C
+        total += power
+        out.append(min(total, (1 << 63) - 1))
+    return np.array(out, np.int64)
+
+
 def varint_lengths(n: np.ndarray, T: int) -> np.ndarray:
     """Symbols each value of ``n`` (>= 0) takes as a varint with parameter ``T``."""
     n = np.asarray(n, np.int64)
@@ -106,28 +118,27 @@ def varint_lengths(n: np.ndarray, T: int) -> np.ndarray:
     acc = n // T
     if C == 1:
         return 1 + acc
-    # acc needs k continuation digits when acc <= C + C^2 + ... + C^k (bijective base C)
-    limits = []
-    total, power = 0, 1
-    while total < (1 << 62):
-        power *= C
-        total += power
-        limits.append(min(total, (1 << 63) - 1))
-    k = np.searchsorted(np.array(limits, np.int64), acc, side="left").astype(np.int64) + 1
+    k = np.searchsorted(_limits(C), acc, side="left").astype(np.int64) + 1
     return 1 + np.where(acc > 0, k, 0)
 
 
 def best_t(n: np.ndarray) -> tuple[int, int]:
-    """The varint parameter that codes ``n`` in the fewest symbols: (T, symbols)."""
-    n = np.asarray(n, np.int64)
+    """The varint parameter that codes ``n`` in the fewest symbols: (T, symbols). A value takes
+    one symbol, plus one for each threshold ``T * (1 + C + ... + C^(j-1))`` it reaches."""
+    n = np.sort(np.asarray(n, np.int64).ravel())
     if n.size == 0:
         return HEADER_T, 0
-    vals, counts = np.unique(n, return_counts=True)
+    top = int(n[-1])
     best = None
     for T in range(1, BASE):
-        if BASE - T == 1 and int(vals[-1]) // T > 1000:
+        C = BASE - T
+        if C == 1 and top // T > 1000:
             continue
-        size = int((varint_lengths(vals, T) * counts).sum())
+        size, span, power = n.size, 1, 1
+        while T * span <= top:
+            size += n.size - int(np.searchsorted(n, T * span, side="left"))
+            power *= C
+            span += power
         if best is None or size < best[1]:
             best = (T, size)
     return best
@@ -327,6 +338,8 @@ def pack(name: str, values: Sequence[Any], stride: int = 1, *, index_columns: Se
         table, _ = encode_varints(col.codes, col.T)
         flat = table.ravel()
         parts.append("".join(alphabet[flat[flat >= 0]].tolist()))
+        if float(np.asarray(col.codes).sum(dtype=np.float64)) >= MAX_Q:
+            return None  # the loader's check sum would not be exact
         total += int(np.asarray(col.codes).sum())
     if total >= MAX_Q:
         return None
@@ -373,40 +386,32 @@ class Unpacked:
 
 
 class _Reader:
-    def __init__(self, name: str, text: str, start: int, cost: DecodeCost):
-        self.name, self.text, self.p = name, text, start
-        self.cost = cost
-        self.header = True
+    """Reads the header's varints one by one (the body's are decoded a group at a time)."""
 
-    def sym(self) -> int:
-        if self.p >= len(self.text):
-            raise PackError(self.name, f"the text ends too early (at character {self.p + 1})")
-        ch = self.text[self.p]
-        self.p += 1
-        s = _SYM.get(ch, -1)
-        if s < 0:
-            raise PackError(self.name, f"character {ch!r} at {self.p} is not a packed symbol")
-        return s
+    def __init__(self, name: str, text: str, syms: np.ndarray, start: int, cost: DecodeCost):
+        self.name, self.text, self.syms, self.p = name, text, syms, start
+        self.cost = cost
 
     def varint(self, T: int) -> int:
         C = BASE - T
         a = 0
-        s = self.sym()
         digits = 0
-        while s >= T:
+        while True:
+            if self.p >= len(self.syms):
+                raise PackError(self.name, f"the text ends too early (at character {self.p + 1})")
+            s = int(self.syms[self.p])
+            self.p += 1
+            if s < 0:
+                raise PackError(self.name, f"character {self.text[self.p - 1]!r} at {self.p} is not a packed symbol")
+            if s < T:
+                break
             a = a * C + s - T + 1
-            s = self.sym()
             digits += 1
             if digits > 12:
                 raise PackError(self.name, f"a number at character {self.p} is too long")
-        if self.header:
-            self.cost.header_varints += 1
-            self.cost.header_slow += digits > 0
-            self.cost.header_continuation += digits
-        else:
-            self.cost.body_varints += 1
-            self.cost.body_slow += digits > 0
-            self.cost.body_continuation += digits
+        self.cost.header_varints += 1
+        self.cost.header_slow += digits > 0
+        self.cost.header_continuation += digits
         return a * T + s
 
     def bounded(self, T: int, hi: int, what: str, lo: int = 0) -> int:
@@ -421,13 +426,45 @@ class _Reader:
         self.cost.header_negative += n % 2
         return unzigzag(n)
 
+    def body(self, T: int, count: int) -> np.ndarray:
+        """``count`` varints with parameter T from here, as an int64 array."""
+        if count == 0:
+            return np.zeros(0, np.int64)
+        rest = self.syms[self.p:]
+        if (rest < 0).any():
+            bad = self.p + int(np.flatnonzero(rest < 0)[0])
+            # only an error if the bad character is inside this group's varints
+            rest = rest[:bad - self.p]
+            if (rest < T).sum() < count:
+                raise PackError(self.name, f"character {self.text[bad]!r} at {bad + 1} is not a packed symbol")
+        ends = np.flatnonzero(rest < T)
+        if len(ends) < count:
+            raise PackError(self.name, "the text ends too early (inside the data)")
+        ends = ends[:count]
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        k = ends - starts  # continuation symbols of each varint
+        if k.max(initial=0) > 12:
+            raise PackError(self.name, "a number in the data is too long")
+        C = BASE - T
+        a = np.zeros(count, np.int64)
+        for j in range(int(k.max(initial=0))):
+            live = k > j
+            d = rest[np.where(live, starts + j, 0)] - T + 1
+            a = np.where(live, a * C + d, a)
+        vals = a * T + rest[ends]
+        self.p += int(ends[-1]) + 1
+        self.cost.body_varints += count
+        self.cost.body_slow += int((k > 0).sum())
+        self.cost.body_continuation += int(k.sum())
+        return vals
+
 
 def header_name(text: Any) -> str | None:
     """The list name written in a packed text (None if it is not one)."""
     if not isinstance(text, str) or not text.startswith(MAGIC):
         return None
     try:
-        r = _Reader("?", text, len(MAGIC), DecodeCost())
+        r = _Reader("?", text, _symbols(text[:64]), len(MAGIC), DecodeCost())
         r.varint(HEADER_T)
         n = r.varint(HEADER_T)
         u16 = text[r.p:].encode("utf-16-le", errors="surrogatepass")[:2 * n]
@@ -435,6 +472,12 @@ def header_name(text: Any) -> str | None:
         return name if len(u16) == 2 * n else None
     except (PackError, UnicodeDecodeError):
         return None
+
+
+def _symbols(text: str) -> np.ndarray:
+    """Symbol values of a text's characters (-1: not a symbol)."""
+    codes = np.frombuffer(text.encode("utf-32-le", errors="surrogatepass"), np.uint32).astype(np.int64)
+    return np.where(codes < 128, _SYM_ARRAY[np.minimum(codes, 127)], -1)
 
 
 def packed_bytes(name: str, text: str) -> int:
@@ -450,13 +493,15 @@ def is_packed(item: Any) -> bool:
 
 
 def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -> Unpacked:
-    """Decode a packed list exactly as the loader blocks do; raises :class:`PackError` naming the
-    list for anything that is not a whole, unedited packed list (checked with its CRC)."""
+    """Decode a packed list as the loader blocks do (the same arithmetic, the same checks) and
+    count what they do; raises :class:`PackError` naming the list for anything that is not a
+    whole, unedited packed list (checked with its CRC as well)."""
     label = name or header_name(text) or "?"
     if not isinstance(text, str) or not text.startswith(MAGIC):
         raise PackError(label, f"does not start with {MAGIC!r} (not a scratch-bake packed list)")
     cost = DecodeCost(chars=len(text))
-    r = _Reader(label, text, len(MAGIC), cost)
+    syms = _symbols(text)
+    r = _Reader(label, text, syms, len(MAGIC), cost)
     crc = r.varint(HEADER_T)
     body_start = r.p
     nlen = r.bounded(HEADER_T, 10_000, "name length")
@@ -481,13 +526,13 @@ def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -
     S = r.bounded(HEADER_T, 4096, "stride", 1)
     if R * S > max_items:
         raise PackError(label, f"{R * S} items is more than {max_items}")
+    grid = np.zeros((R, S), np.float64)
+    ints = np.zeros(S, bool)
     groups: list[Column] = []
-    out: list = [None] * (R * S)
     m = 0
     total = 0
     c0 = 0
     while c0 < S:
-        r.header = True
         col = Column(r.bounded(HEADER_T, 4, "column mode"))
         col.width = r.bounded(HEADER_T, S - c0, "width", 1)
         col.T = r.bounded(HEADER_T, BASE - 1, "T", 1)
@@ -500,52 +545,46 @@ def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -
         if (col.mode == PALETTE) != (P > 0) and R:
             raise PackError(label, "a palette where there should be none, or none where there should be one")
         groups.append(col)
-        r.header = False
         mode, w, sc = col.mode, col.width, 10 ** col.decimals
         new = 0
         if mode == CONST:
-            v = col.q0 if sc == 1 else col.q0 / sc
-            for k in range(c0, R * S, S):
-                out[k] = v
-        elif mode == INDEX:
-            for row in range(R):
-                for j in range(w):
-                    n = r.varint(col.T)
-                    total += n
-                    if n == 0:
-                        m += 1
-                        new += 1
-                        q = m
-                    else:
-                        q = m + 1 - n
-                        if q < 1:
-                            raise PackError(label, f"index code {n} points before the first item")
-                    out[row * S + c0 + j] = q
+            q = np.full(R, col.q0, np.int64)
         else:
-            acc = 0
-            for k in range(c0, R * S, S):
-                n = r.varint(col.T)
-                total += n
-                if mode == OFFSET:
-                    q = col.q0 + n
-                elif mode == DELTA:
-                    cost.body_negative += n % 2
-                    acc += col.q0 + unzigzag(n)
-                    q = acc
-                else:
-                    if n >= len(col.palette):
-                        raise PackError(label, f"palette code {n} is past the palette ({len(col.palette)})")
-                    q = col.palette[n]
-                if abs(q) >= MAX_Q:
-                    raise PackError(label, "a value is too large to be exact")
-                out[k] = q if sc == 1 else q / sc
-        cost.groups.append((MODE_NAMES[mode], w, new, len(col.palette)))
+            n = r.body(col.T, R * w)
+            if float(n.sum(dtype=np.float64)) >= MAX_Q:
+                raise PackError(label, "the codes sum past 2^53")
+            total += int(n.sum())
+            if mode == INDEX:
+                zero = n == 0
+                m_after = m + np.cumsum(zero)
+                q = np.where(zero, m_after, m_after + 1 - n)
+                if len(q) and q.min() < 1:
+                    raise PackError(label, "an index code points before the first item")
+                new = int(zero.sum())
+                m = int(m_after[-1]) if len(q) else m
+                q = q.reshape(R, w)
+            elif mode == OFFSET:
+                q = col.q0 + n
+            elif mode == DELTA:
+                cost.body_negative += int((n % 2).sum())
+                q = np.cumsum(col.q0 + np.where(n % 2 == 0, n // 2, -(n + 1) // 2))
+            else:
+                if len(n) and n.max() >= P:
+                    raise PackError(label, f"a palette code is past the palette ({P})")
+                q = np.array(col.palette, np.int64)[n] if len(n) else n
+        q = np.asarray(q, np.int64).reshape(R, w)
+        if (np.abs(q) >= MAX_Q).any():
+            raise PackError(label, "a value is too large to be exact")
+        grid[:, c0:c0 + w] = q / float(sc) if sc != 1 else q
+        ints[c0:c0 + w] = sc == 1
+        cost.groups.append((MODE_NAMES[mode], w, new, P))
         c0 += w
-    r.header = True
     check = r.varint(HEADER_T)
     if check != total:
         raise PackError(label, "the sum of the codes does not match")
     if r.p != len(text):
         raise PackError(label, f"{len(text) - r.p} characters left over after the last item")
     cost.rows, cost.stride = R, S
-    return Unpacked(label, out, R, S, [MODE_NAMES[c.mode] for c in groups], len(text), cost)
+    cols = [grid[:, c].astype(np.int64).tolist() if ints[c] else grid[:, c].tolist() for c in range(S)]
+    items = [v for row in zip(*cols) for v in row] if S > 1 else (cols[0] if S else [])
+    return Unpacked(label, items, R, S, [MODE_NAMES[c.mode] for c in groups], len(text), cost)

@@ -138,7 +138,16 @@ def check_packed_lists(project: dict[str, Any], path: Path | None = None) -> lis
     rebuilds. A bad one is an :class:`InputError` naming the list (and the project)."""
     from .pack import PackError, is_packed, unpack
 
+    from .pack import header_name
+
     found = []
+    # the loader's own list of names (item k of the packed list rebuilds _pk names[k]): names a
+    # text whose header is unreadable
+    expected: list = []
+    for t in project.get("targets", []) or []:
+        for entry in ((t.get("lists") or {}).values() if isinstance(t, dict) else ()):
+            if isinstance(entry, list) and len(entry) >= 2 and entry[0] == "_pk names" and isinstance(entry[1], list):
+                expected = entry[1]
     for t in project.get("targets", []) or []:
         if not isinstance(t, dict):
             continue
@@ -150,7 +159,10 @@ def check_packed_lists(project: dict[str, Any], path: Path | None = None) -> lis
                 if not is_packed(text):
                     continue
                 try:
-                    u = unpack(text)
+                    name = header_name(text)
+                    if name is None and k <= len(expected):
+                        name = str(expected[k - 1])
+                    u = unpack(text, name)
                 except PackError as e:
                     raise InputError(f"{e} (item {k} of list '{entry[0]}' in {owner})", path=path) from None
                 found.append({"list": u.name, "owner": owner, "in": str(entry[0]), "item": k,

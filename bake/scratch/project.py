@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from . import sb3
 from . import readers
+from .check import check_packed_lists
 
 
 def _cfg(cfg: Any, key: str, default: Any) -> Any:
@@ -131,43 +132,6 @@ def _with_loader(spec: readers.ReaderSpec | None, packed: dict[str, Any], packed
     if spec is None:  # no reader asked for: a sprite with the loader alone
         spec = readers.ReaderSpec(mesh=None, textimage=False, renderer=False)
     return dataclasses.replace(spec, loader=LoaderSpec(list(packed), packed_name))
-
-
-def check_packed_lists(project: dict[str, Any], path: Path | None = None) -> list[dict[str, Any]]:
-    """Decode every packed text in a project (any list item that starts like one): what each
-    rebuilds. A bad one is an :class:`InputError` naming the list (and the project)."""
-    from .pack import PackError, is_packed, unpack
-
-    from .pack import header_name
-
-    found = []
-    # the loader's own list of names (item k of the packed list rebuilds _pk names[k]): names a
-    # text whose header is unreadable
-    expected: list = []
-    for t in project.get("targets", []) or []:
-        for entry in ((t.get("lists") or {}).values() if isinstance(t, dict) else ()):
-            if isinstance(entry, list) and len(entry) >= 2 and entry[0] == "_pk names" and isinstance(entry[1], list):
-                expected = entry[1]
-    for t in project.get("targets", []) or []:
-        if not isinstance(t, dict):
-            continue
-        owner = "Stage" if t.get("isStage") else str(t.get("name"))
-        for entry in (t.get("lists") or {}).values():
-            if not (isinstance(entry, list) and len(entry) >= 2 and isinstance(entry[1], list)):
-                continue
-            for k, text in enumerate(entry[1], start=1):
-                if not is_packed(text):
-                    continue
-                try:
-                    name = header_name(text)
-                    if name is None and k <= len(expected):
-                        name = str(expected[k - 1])
-                    u = unpack(text, name)
-                except PackError as e:
-                    raise InputError(f"{e} (item {k} of list '{entry[0]}' in {owner})", path=path) from None
-                found.append({"list": u.name, "owner": owner, "in": str(entry[0]), "item": k,
-                              "items": len(u.items), "chars": u.chars, "modes": u.modes, "cost": u.cost})
-    return found
 
 
 def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,

@@ -194,6 +194,10 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
 
     if cfg.vertices:
         out.append(ScratchList(n.vertices, scene.positions[order].ravel(), 3, "x, y, z per vertex", "number", dec))
+        if V:  # rounding to `dec` decimals moves a coordinate by at most half a step
+            record.accuracy["position_error"] = 0.5 * 10.0 ** -dec / diag if diag > 0 else 0.0
+            record.details["positions"] = {"decimals": dec, "step": 10.0 ** -dec, "max_error": 0.5 * 10.0 ** -dec,
+                                           "max_error_of_diagonal": record.accuracy["position_error"]}
 
     poly_lists: list[ScratchList] = []
     if cfg.faces != "triangles" and "bsp" not in scene.artefacts:

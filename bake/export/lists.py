@@ -290,7 +290,8 @@ def pack_lists(lists: list[ScratchList], values: dict[str, list], info: dict[str
                    "`add to list` stops at 200,000; set 0 for TurboWarp)")
         pk = None
         if why is None:
-            pk = pack(name, values[name], lst.stride, index_columns=index_columns(name, cfg))
+            pk = pack(name, values[name], lst.pack_stride or lst.stride, prefix=lst.pack_prefix,
+                      index_columns=index_columns(name, cfg))
             if pk is None:
                 why = "values are not decimals below 2^53 (not packed)"
         if pk is not None:

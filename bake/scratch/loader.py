@@ -63,6 +63,8 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
     z, mode, k, w = r.v("_pkz"), r.v("_pkmode"), r.v("_pkk"), r.v("_pkw")
     q0, sc, acc = r.v("_pkq0"), r.v("_pksc"), r.v("_pkacc")
     rows, stride, L, i, gT = r.v("_pkR"), r.v("_pkSt"), r.v("_pkL"), r.v("_pki"), r.v("_pkgT")
+    base = r.v("_pkb")
+    r.v("_pkns")
     err = r.v("_pk error", "")
     r.v(ERROR_VAR, "")
     r.v(DONE_VAR, 0)
@@ -113,7 +115,7 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         B.if_(gt(n, L), fail("palette larger than the text")),
         B.repeat(n, [num, unzig, B.add_to(pal, div(z, sc))]),
         r.set("_pkT", gT), r.set("_pkC", sub(BASE, gT)),  # the group's T for _pk read
-        r.set("_pkc", k), r.set("_pkacc", 0), r.set("_pkz", 0),
+        r.set("_pkc", add(base, k)), r.set("_pkacc", 0), r.set("_pkz", 0),
         B.if_(eq(mode, 3), [  # index: w columns, row by row
             B.repeat(rows, [
                 B.repeat(w, [
@@ -137,6 +139,14 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         ])]),
         r.change("_pkk", w),
     ]
+    section = [
+        num, r.set("_pkR", n), num, r.set("_pkSt", n),
+        B.if_(or_(lt(stride, 1), gt(add(base, mul(rows, stride)), add(mul(L, 10), 1000000))), fail("bad size")),
+        B.repeat(mul(rows, stride), [B.add_to(out, 0)]),
+        r.set("_pkk", 1),
+        B.repeat_until(gt(k, stride), group),
+        r.change("_pkb", mul(rows, stride)),
+    ]
     r.define("_pk unpack %s", ["text"], [
         r.set("_pk error", ""),
         B.delete_all(out),
@@ -145,14 +155,13 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         r.set("_pkp", len(MAGIC) + 1),
         num,  # the CRC (for bake check; not checked here)
         num, r.change("_pkp", n),  # the name
-        num, r.set("_pkR", n), num, r.set("_pkSt", n),
-        B.if_(or_(lt(stride, 1), gt(mul(rows, stride), add(mul(L, 10), 1000000))), fail("bad size")),
-        B.repeat(mul(rows, stride), [B.add_to(out, 0)]),
-        r.set("_pkh", 0), r.set("_pkm", 0), r.set("_pkk", 1),
-        B.repeat_until(gt(k, stride), group),
+        num, r.set("_pkns", n),
+        B.if_(gt(n, 8), fail("bad section count")),
+        r.set("_pkh", 0), r.set("_pkm", 0), r.set("_pkb", 0),
+        B.repeat(var("_pkns"), section),
         num,
         B.if_(or_(not_eq(n, h), not_eq(p, add(L, 1))), fail("the text is truncated or was edited")),
-        B.if_(lt(B.list_length(out), mul(rows, stride)),
+        B.if_(lt(B.list_length(out), base),
               fail("more items than vanilla Scratch's `add to list` allows (200,000; TurboWarp has no limit)")),
     ])
     # every packed text into its list (an empty item leaves its list alone)
@@ -199,14 +208,17 @@ def decode_cost(cost: DecodeCost, n_lists: int = 1) -> int:
     variable reads included, a custom block call as two) for one list in ``unpack lists`` (of
     ``n_lists`` packed lists): the call of ``_pk unpack``, the decoding and the copy into the
     list. The whole ``unpack lists`` is the sum over the lists + :data:`UNPACK_LISTS_FIXED`."""
-    N, R = cost.items, cost.rows
+    N = cost.items
     total = 4 * cost.header_varints + _varints(cost.header_varints, cost.header_slow, cost.header_continuation)
     total += _varints(cost.body_varints, cost.body_slow, cost.body_continuation)
     total += 9 * cost.header_zigzag + 2 * cost.header_negative  # _pk unzig in the header
-    total += 58 + 5 * N + 4 * len(cost.groups)  # _pk unpack's fixed part, presizing _pk out
+    total += 40 + 2 * len(cost.sections)  # _pk unpack's fixed part
+    for rows, stride in cost.sections:  # a section's header, presizing _pk out, its group loop
+        total += 30 + 5 * rows * stride
+    total += 4 * len(cost.groups)
     total += 15 + 3 * n_lists + 6 * N  # in unpack lists: the item test, the dispatch, the copy
-    for mode, w, new, P in cost.groups:
-        total += 36 + 2 * (P + 1) + 4 * P
+    for mode, w, new, P, R in cost.groups:
+        total += 38 + 2 * (P + 1) + 4 * P
         if mode == "index":
             codes = R * w
             total += 2 * (R + 1) + R * (2 * (w + 1) + 4) + 6 * codes + 4 * new + 6 * (codes - new)

@@ -221,26 +221,35 @@ def decimals_of(values: np.ndarray) -> tuple[int, np.ndarray] | None:
     return None
 
 
-def column_choices(q: np.ndarray, decimals: int, allow_palette: bool = True) -> list[Column]:
-    """Every way to code one column (const when all values agree; else offset, delta, palette)."""
+def _t_and_size(codes: np.ndarray, fixed_t: int | None) -> tuple[int, int]:
+    if fixed_t is None:
+        return best_t(codes)
+    return fixed_t, int(varint_lengths(codes, fixed_t).sum())
+
+
+def column_choices(q: np.ndarray, decimals: int, allow: frozenset = frozenset(range(5)),
+                   fixed_t: int | None = None) -> list[Column]:
+    """Every way to code one column (const when all values agree; else offset, delta, palette).
+    ``allow`` / ``fixed_t`` restrict the choice (the benchmark measures each idea alone)."""
     out: list[Column] = []
-    if q.size == 0 or (q == q[0]).all():
+    if (q.size == 0 or (q == q[0]).all()) and CONST in allow:
         return [Column(CONST, decimals, q0=int(q[0]) if q.size else 0, codes=None, symbols=0)]
-    lo = int(q.min())
+    lo = int(q.min()) if q.size else 0
     codes = q - lo
-    T, size = best_t(codes)
+    T, size = _t_and_size(codes, fixed_t)
     out.append(Column(OFFSET, decimals, T, q0=lo, codes=codes, symbols=size))
-    codes = zigzag(np.diff(q, prepend=0))
-    T, size = best_t(codes)
-    out.append(Column(DELTA, decimals, T, codes=codes, symbols=size))
-    if allow_palette:
+    if DELTA in allow:
+        codes = zigzag(np.diff(q, prepend=0))
+        T, size = _t_and_size(codes, fixed_t)
+        out.append(Column(DELTA, decimals, T, codes=codes, symbols=size))
+    if PALETTE in allow and q.size:
         vals, inv, counts = np.unique(q, return_inverse=True, return_counts=True)
         if len(vals) <= max(1, q.size // 2):
             order = np.lexsort((vals, -counts))  # most frequent first (ties: smaller value)
             rank = np.empty(len(vals), np.int64)
             rank[order] = np.arange(len(vals))
             codes = rank[inv.ravel()]
-            T, size = best_t(codes)
+            T, size = _t_and_size(codes, fixed_t)
             out.append(Column(PALETTE, decimals, T, palette=[int(x) for x in vals[order]], codes=codes,
                               symbols=size))
     return out
@@ -283,69 +292,87 @@ def _utf16_len(s: str) -> int:
     return len(s.encode("utf-16-le")) // 2
 
 
-def pack(name: str, values: Sequence[Any], stride: int = 1, *, index_columns: Sequence[int] = (),
-         modes: dict[int, int] | None = None) -> Packed | None:
-    """Pack a numeric list (the items as a JSON reader reads the plain list: ints and floats).
-
-    ``index_columns``: adjacent columns holding 1-based indices in first-use order (coded as one
-    index group when that is shorter). ``modes``: force a mode per column (benchmarks). Returns
-    None when the list cannot be packed exactly (strings, non-decimal floats, ints past 2^53)."""
-    items = list(values)
-    if any(isinstance(x, (str, bool)) or x is None for x in items):
-        return None
-    n = len(items)
-    S = stride if stride and stride > 0 and n % stride == 0 and n else 1
-    R = n // S
-    if any(isinstance(x, int) and abs(x) >= MAX_Q for x in items):
-        return None
-    arr = np.asarray(items, np.float64) if n else np.zeros(0)
-    if n and not np.isfinite(arr).all():
-        return None
-    grid = arr.reshape(R, S)
-    qs = []
-    for c in range(S):
-        dq = decimals_of(grid[:, c])
-        if dq is None:
-            return None
-        qs.append(dq)
+def _groups(grid: np.ndarray, qs: list, index_columns: Sequence[int], modes: dict[int, int] | None,
+            allow: frozenset, fixed_t: int | None) -> list[Column]:
+    """The cheapest column groups for one section (rows x columns of q at their decimals)."""
+    R, S = grid.shape
     singles: list[Column] = []
     for c in range(S):
         d, q = qs[c]
-        choices = column_choices(q, d)
+        choices = column_choices(q, d, allow, fixed_t)
         if modes and c in modes:
             choices = [ch for ch in choices if ch.mode == modes[c]] or choices
         singles.append(min(choices, key=lambda ch: (ch.cost(), ch.mode)))
     groups: list[tuple[int, Column]] = [(c, singles[c]) for c in range(S)]  # (first column, group)
     idx = sorted(set(c for c in index_columns if 0 <= c < S))
     if idx and R and idx == list(range(idx[0], idx[-1] + 1)) and all(qs[c][0] == 0 for c in idx) \
-            and not (modes and any(c in modes for c in idx)):
+            and not (modes and any(c in modes for c in idx)) and INDEX in allow:
         flat = np.stack([qs[c][1] for c in idx], axis=1).ravel()
         codes = index_codes(flat)
         if codes is not None:
-            T, size = best_t(codes)
+            T, size = _t_and_size(codes, fixed_t)
             col = Column(INDEX, 0, T, codes=codes, symbols=size, width=len(idx))
             if col.cost() < sum(singles[c].cost() for c in idx):
                 groups = [(c, g) for c, g in groups if c < idx[0]] + [(idx[0], col)] + \
                          [(c, g) for c, g in groups if c > idx[-1]]
-    columns = [g for _, g in groups]
-    parts = [varint_text([_utf16_len(name)]) + name + varint_text([R, S])]
+    return [g for _, g in groups]
+
+
+def pack(name: str, values: Sequence[Any], stride: int = 1, *, prefix: int = 0,
+         index_columns: Sequence[int] = (), modes: dict[int, int] | None = None,
+         allow: Sequence[int] = tuple(range(5)), fixed_t: int | None = None) -> Packed | None:
+    """Pack a numeric list (the items as a JSON reader reads the plain list: ints and floats).
+
+    The list is ``prefix`` items (a section of one column, e.g. a BVH's root box) and then rows of
+    ``stride`` items (one section). ``index_columns``: adjacent columns holding 1-based indices
+    in first-use order (coded as one index group when that is shorter). ``modes``: force a mode
+    per column; ``allow``: the column modes that may be used (offset always can); ``fixed_t``: one
+    varint parameter for every group instead of the best per group (both for the benchmark's
+    ablations). Returns None when the list cannot be packed exactly (strings, non-decimal floats,
+    ints past 2^53)."""
+    items = list(values)
+    if any(isinstance(x, (str, bool)) or x is None for x in items):
+        return None
+    n = len(items)
+    if any(isinstance(x, int) and abs(x) >= MAX_Q for x in items):
+        return None
+    arr = np.asarray(items, np.float64) if n else np.zeros(0)
+    if n and not np.isfinite(arr).all():
+        return None
+    prefix = prefix if 0 < prefix < n else 0
+    rest = n - prefix
+    S = stride if stride and stride > 0 and rest % stride == 0 and rest else 1
+    sections = ([(arr[:prefix].reshape(prefix, 1), ())] if prefix else []) + \
+        [(arr[prefix:].reshape(rest // S, S), index_columns)]
+    parts = [varint_text([_utf16_len(name)]) + name + varint_text([len(sections)])]
     total = 0
     alphabet = np.array(list(ALPHABET))
-    for col in columns:  # each group: its header, then its codes
-        parts.append(varint_text(col.header()))
-        if col.mode == CONST or col.codes is None or not len(col.codes):
-            continue
-        table, _ = encode_varints(col.codes, col.T)
-        flat = table.ravel()
-        parts.append("".join(alphabet[flat[flat >= 0]].tolist()))
-        if float(np.asarray(col.codes).sum(dtype=np.float64)) >= MAX_Q:
-            return None  # the loader's check sum would not be exact
-        total += int(np.asarray(col.codes).sum())
+    columns: list[Column] = []
+    for grid, idx in sections:
+        qs = []
+        for c in range(grid.shape[1]):
+            dq = decimals_of(grid[:, c])
+            if dq is None:
+                return None
+            qs.append(dq)
+        groups = _groups(grid, qs, idx, modes if grid.shape[1] == S else None, frozenset(allow), fixed_t)
+        columns += groups
+        parts.append(varint_text(list(grid.shape)))
+        for col in groups:  # each group: its header, then its codes
+            parts.append(varint_text(col.header()))
+            if col.mode == CONST or col.codes is None or not len(col.codes):
+                continue
+            table, _ = encode_varints(col.codes, col.T)
+            flat = table.ravel()
+            parts.append("".join(alphabet[flat[flat >= 0]].tolist()))
+            if float(np.asarray(col.codes).sum(dtype=np.float64)) >= MAX_Q:
+                return None  # the loader's check sum would not be exact
+            total += int(np.asarray(col.codes).sum())
     if total >= MAX_Q:
         return None
     body = "".join(parts) + varint_text([total])
     crc = zlib.crc32(name.encode("utf-8") + body.encode("utf-8"))
-    return Packed(name, MAGIC + varint_text([crc]) + body, R, S, columns, n)
+    return Packed(name, MAGIC + varint_text([crc]) + body, rest // S, S, columns, n)
 
 
 # --------------------------------------------------------------------------- unpacking
@@ -362,14 +389,15 @@ class DecodeCost:
     header_zigzag: int = 0  # zigzag values decoded in the header (const, offset, palette entries)
     header_negative: int = 0  # of those, the negative ones
     body_negative: int = 0  # negative deltas
-    groups: list = field(default_factory=list)  # (mode name, width, new-vertex codes, palette size)
-    rows: int = 0
+    groups: list = field(default_factory=list)  # (mode name, width, new-vertex codes, palette size, rows)
+    sections: list = field(default_factory=list)  # (rows, stride) of each section
+    rows: int = 0  # of the last section
     stride: int = 0
     chars: int = 0
 
     @property
     def items(self) -> int:
-        return self.rows * self.stride
+        return sum(R * S for R, S in self.sections)
 
 
 @dataclass
@@ -522,69 +550,73 @@ def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -
         raise PackError(label, "holds characters that are not text") from None
     if zlib.crc32(whole) != crc:
         raise PackError(label, "the check sum does not match: the text was truncated or edited")
-    R = r.bounded(HEADER_T, max_items, "row count")
-    S = r.bounded(HEADER_T, 4096, "stride", 1)
-    if R * S > max_items:
-        raise PackError(label, f"{R * S} items is more than {max_items}")
-    grid = np.zeros((R, S), np.float64)
-    ints = np.zeros(S, bool)
+    nsec = r.bounded(HEADER_T, 8, "section count")
+    items: list = []
     groups: list[Column] = []
     m = 0
     total = 0
-    c0 = 0
-    while c0 < S:
-        col = Column(r.bounded(HEADER_T, 4, "column mode"))
-        col.width = r.bounded(HEADER_T, S - c0, "width", 1)
-        col.T = r.bounded(HEADER_T, BASE - 1, "T", 1)
-        col.decimals = r.bounded(HEADER_T, MAX_DECIMALS, "decimals")
-        col.q0 = r.zig()
-        P = r.bounded(HEADER_T, len(text), "palette size")
-        col.palette = [r.zig() for _ in range(P)]
-        if col.mode != INDEX and col.width != 1:
-            raise PackError(label, f"a {MODE_NAMES[col.mode]} group {col.width} columns wide")
-        if (col.mode == PALETTE) != (P > 0) and R:
-            raise PackError(label, "a palette where there should be none, or none where there should be one")
-        groups.append(col)
-        mode, w, sc = col.mode, col.width, 10 ** col.decimals
-        new = 0
-        if mode == CONST:
-            q = np.full(R, col.q0, np.int64)
-        else:
-            n = r.body(col.T, R * w)
-            if float(n.sum(dtype=np.float64)) >= MAX_Q:
-                raise PackError(label, "the codes sum past 2^53")
-            total += int(n.sum())
-            if mode == INDEX:
-                zero = n == 0
-                m_after = m + np.cumsum(zero)
-                q = np.where(zero, m_after, m_after + 1 - n)
-                if len(q) and q.min() < 1:
-                    raise PackError(label, "an index code points before the first item")
-                new = int(zero.sum())
-                m = int(m_after[-1]) if len(q) else m
-                q = q.reshape(R, w)
-            elif mode == OFFSET:
-                q = col.q0 + n
-            elif mode == DELTA:
-                cost.body_negative += int((n % 2).sum())
-                q = np.cumsum(col.q0 + np.where(n % 2 == 0, n // 2, -(n + 1) // 2))
+    R = S = 0
+    for _ in range(nsec):
+        R = r.bounded(HEADER_T, max_items, "row count")
+        S = r.bounded(HEADER_T, 4096, "stride", 1)
+        if len(items) + R * S > max_items:
+            raise PackError(label, f"more than {max_items} items")
+        grid = np.zeros((R, S), np.float64)
+        ints = np.zeros(S, bool)
+        c0 = 0
+        while c0 < S:
+            col = Column(r.bounded(HEADER_T, 4, "column mode"))
+            col.width = r.bounded(HEADER_T, S - c0, "width", 1)
+            col.T = r.bounded(HEADER_T, BASE - 1, "T", 1)
+            col.decimals = r.bounded(HEADER_T, MAX_DECIMALS, "decimals")
+            col.q0 = r.zig()
+            P = r.bounded(HEADER_T, len(text), "palette size")
+            col.palette = [r.zig() for _ in range(P)]
+            if col.mode != INDEX and col.width != 1:
+                raise PackError(label, f"a {MODE_NAMES[col.mode]} group {col.width} columns wide")
+            if (col.mode == PALETTE) != (P > 0) and R:
+                raise PackError(label, "a palette where there should be none, or none where there should be one")
+            groups.append(col)
+            mode, w, sc = col.mode, col.width, 10 ** col.decimals
+            new = 0
+            if mode == CONST:
+                q = np.full(R, col.q0, np.int64)
             else:
-                if len(n) and n.max() >= P:
-                    raise PackError(label, f"a palette code is past the palette ({P})")
-                q = np.array(col.palette, np.int64)[n] if len(n) else n
-        q = np.asarray(q, np.int64).reshape(R, w)
-        if (np.abs(q) >= MAX_Q).any():
-            raise PackError(label, "a value is too large to be exact")
-        grid[:, c0:c0 + w] = q / float(sc) if sc != 1 else q
-        ints[c0:c0 + w] = sc == 1
-        cost.groups.append((MODE_NAMES[mode], w, new, P))
-        c0 += w
+                n = r.body(col.T, R * w)
+                if float(n.sum(dtype=np.float64)) >= MAX_Q:
+                    raise PackError(label, "the codes sum past 2^53")
+                total += int(n.sum())
+                if mode == INDEX:
+                    zero = n == 0
+                    m_after = m + np.cumsum(zero)
+                    q = np.where(zero, m_after, m_after + 1 - n)
+                    if len(q) and q.min() < 1:
+                        raise PackError(label, "an index code points before the first item")
+                    new = int(zero.sum())
+                    m = int(m_after[-1]) if len(q) else m
+                elif mode == OFFSET:
+                    q = col.q0 + n
+                elif mode == DELTA:
+                    cost.body_negative += int((n % 2).sum())
+                    q = np.cumsum(col.q0 + np.where(n % 2 == 0, n // 2, -(n + 1) // 2))
+                else:
+                    if len(n) and n.max() >= P:
+                        raise PackError(label, f"a palette code is past the palette ({P})")
+                    q = np.array(col.palette, np.int64)[n] if len(n) else n
+            q = np.asarray(q, np.int64).reshape(R, w)
+            if (np.abs(q) >= MAX_Q).any():
+                raise PackError(label, "a value is too large to be exact")
+            grid[:, c0:c0 + w] = q / float(sc) if sc != 1 else q
+            ints[c0:c0 + w] = sc == 1
+            cost.groups.append((MODE_NAMES[mode], w, new, P, R))
+            c0 += w
+        cols = [grid[:, c].astype(np.int64).tolist() if ints[c] else grid[:, c].tolist() for c in range(S)]
+        items += [v for row in zip(*cols) for v in row] if S > 1 else (cols[0] if S else [])
+        cost.sections.append((R, S))
     check = r.varint(HEADER_T)
     if check != total:
         raise PackError(label, "the sum of the codes does not match")
     if r.p != len(text):
         raise PackError(label, f"{len(text) - r.p} characters left over after the last item")
     cost.rows, cost.stride = R, S
-    cols = [grid[:, c].astype(np.int64).tolist() if ints[c] else grid[:, c].tolist() for c in range(S)]
-    items = [v for row in zip(*cols) for v in row] if S > 1 else (cols[0] if S else [])
     return Unpacked(label, items, R, S, [MODE_NAMES[c.mode] for c in groups], len(text), cost)

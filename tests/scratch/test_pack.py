@@ -34,7 +34,7 @@ def roundtrip(name, items, stride=1, **kw):
     assert pk is not None
     u = P.unpack(pk.text, name)
     assert same(u.items, items), name
-    assert u.rows * u.stride == len(items)
+    assert u.cost.items == len(items)
     return pk, u
 
 
@@ -76,6 +76,20 @@ def test_index_columns_in_first_use_order():
     skip = [5, 1, 2, 1, 3, 4, 9, 1]
     pk2, _ = roundtrip("tris", skip, 4, index_columns=(0, 1, 2))
     assert all(c["mode"] != "index" for c in pk2.describe())
+
+
+def test_a_prefix_section_before_the_records():
+    """A BVH's nodes: a 6-item root box (floats) and then 7-item records (ints): the records
+    pack column by column once the prefix is its own section."""
+    box = [-1.25, 0.5, -3.0, 2.75, 4.5, 1.0]
+    recs = []
+    for k in range(300):
+        recs += [65535 - k % 7, 7 * k + 7, k + 1, 2 ** 35 + 977 * k, 2 ** 34 + 13 * k, 5 * k, 2 ** 30 - k]
+    items = box + recs
+    whole = P.pack("bvh nodes", items, 1)
+    pk, u = roundtrip("bvh nodes", items, 7, prefix=6)
+    assert u.cost.sections == [(6, 1), (300, 7)]
+    assert whole is None or pk.chars < whole.chars
 
 
 def test_index_codes_match_definition():
@@ -204,11 +218,13 @@ def test_header_is_checked_beyond_the_crc():
         crc = zlib.crc32(name.encode() + body.encode())
         return P.MAGIC + P.varint_text([crc]) + body
 
+    with pytest.raises(P.PackError, match="section count"):
+        P.unpack(forge([40]))
     with pytest.raises(P.PackError, match="stride"):
-        P.unpack(forge([3, 0]))
+        P.unpack(forge([1, 3, 0]))
     with pytest.raises(P.PackError, match="column mode"):
-        P.unpack(forge([1, 1, 9]))
+        P.unpack(forge([1, 1, 1, 9]))
     with pytest.raises(P.PackError, match="T"):
-        P.unpack(forge([1, 1, 1, 1, 0]))  # T = 0 would loop for ever in Scratch
+        P.unpack(forge([1, 1, 1, 1, 1, 0]))  # T = 0 would loop for ever in Scratch
     with pytest.raises(P.PackError, match="ends too early"):
-        P.unpack(forge([5, 1, 1, 1, 10, 0, 0, 0]))  # 5 rows, no data
+        P.unpack(forge([1, 5, 1, 1, 1, 10, 0, 0, 0]))  # 5 rows, no data

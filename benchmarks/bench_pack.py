@@ -244,17 +244,22 @@ def main() -> None:
         keys = [k for k in baked if k != "bunny69k_bsp"]
         jobs = [{"load": str(baked[k][2]["path"]), "runs": [
             {"call": {"target": "Mesh", "proccode": "unpack lists", "args": []},
-             "read": {"target": "Stage", "lists": list(baked[k][1]["lists"])}}]} for k in keys]
+             "read": {"target": "Stage", "lists": list(baked[k][1]["lists"])}},
+            {"read": {"target": "Mesh", "variables": ["unpack error"]}}]} for k in keys]
         out = run_vm(jobs)
         for k, res in zip(keys, out):
-            run = res["runs"][0]
+            run, state = res["runs"]
             m = result["models"][k]
+            # vanilla rebuilds lists of up to 200,000 items (`add to list`); a longer one is an error, left empty
+            small = {n: items for n, items in baked[k][1]["lists"].items() if len(items) <= 200_000}
             m["vm"] = {"blocks": run["blocks"], "ms": round(run["ms"], 1), "done": run["done"],
                        "blocks_equal_model": run["blocks"] == m["decode_blocks"],
-                       "lossless": all(same_items(run["lists"][n], items) for n, items in baked[k][1]["lists"].items())}
+                       "unpack_error": state["variables"]["unpack error"],
+                       "lists_checked": len(small), "lists_over_200000": len(baked[k][1]["lists"]) - len(small),
+                       "lossless": all(same_items(run["lists"][n], items) for n, items in small.items())}
             print(f"{k}: scratch-vm {run['blocks']:,} blocks ({run['ms']:.0f} ms), model "
-                  f"{'equal' if m['vm']['blocks_equal_model'] else 'DIFFERENT'}, lossless {m['vm']['lossless']}",
-                  flush=True)
+                  f"{'equal' if m['vm']['blocks_equal_model'] else 'different'}, lossless {m['vm']['lossless']} "
+                  f"({len(small)} lists; error {m['vm']['unpack_error']!r})", flush=True)
 
     # TurboWarp: seconds of `unpack lists`, compiled and interpreted
     if not args.no_turbowarp:
@@ -265,16 +270,20 @@ def main() -> None:
             result["turbowarp_skipped"] = why
         else:
             keys = list(baked)
-            run = turbowarp.run([(k, baked[k][2]["path"]) for k in keys], modes=("compiled", "interpreted"), repeat=3,
-                                action={"call": {"target": "Mesh", "proccode": "unpack lists", "args": []}},
-                                timeout_ms=900_000)
-            result["turbowarp_versions"] = run.versions
-            for r in run.results:
-                secs = [x["stepSeconds"] for x in r.runs]
-                result["models"][r.id].setdefault("turbowarp", {})[r.mode] = {
-                    "seconds": [round(s, 4) for s in secs], "median": round(float(np.median(secs)), 4),
-                    "min": round(min(secs), 4), "errors": r.errors[:3]}
-                print(f"{r.id} {r.mode}: {', '.join(f'{s:.3f}' for s in secs)} s", flush=True)
+            for k in keys:  # one model at a time: every list is read back and compared
+                run = turbowarp.run([(k, baked[k][2]["path"])], modes=("compiled", "interpreted"), repeat=3,
+                                    action={"call": {"target": "Mesh", "proccode": "unpack lists", "args": []}},
+                                    read={"target": "Stage", "lists": list(baked[k][1]["lists"]), "variables": []},
+                                    timeout_ms=900_000)
+                result["turbowarp_versions"] = run.versions
+                for r in run.results:
+                    secs = [x["stepSeconds"] for x in r.runs]
+                    lossless = all(same_items(r.lists.get(n, []), items) for n, items in baked[k][1]["lists"].items())
+                    result["models"][r.id].setdefault("turbowarp", {})[r.mode] = {
+                        "seconds": [round(s, 4) for s in secs], "median": round(float(np.median(secs)), 4),
+                        "min": round(min(secs), 4), "errors": r.errors[:3], "lossless": lossless, "load": load()}
+                    print(f"{r.id} {r.mode}: {', '.join(f'{s:.3f}' for s in secs)} s, lossless {lossless} "
+                          f"(load {load()})", flush=True)
 
     # ideas one at a time (bytes), on the 2k and 69k bunnies
     for key in ("bunny2k", "bunny69k_bsp"):
@@ -293,14 +302,14 @@ def main() -> None:
 
     # format changes that cost accuracy (2k bunny)
     base = models(True)["bunny2k"]["config"]
-    lossy = {"export.precision": [], "bsp.plane_decimals": []}
+    lossy = {"precision": [], "plane_decimals": []}
     for prec in (3, 4, 5, 6):
         c = with_export(base, precision=prec, pack=True)
         b = bake(c, tmp / "bunny2k" / "packed")
         T = len(b["lists"]["tris"]) // 4
         tot = sum(v["project_json_bytes"] for v in b["info"].values())
         pos = b["export"].details.get("positions", {})
-        lossy["export.precision"].append({"value": prec, "triangles": T, "packed_bytes": tot,
+        lossy["precision"].append({"value": prec, "triangles": T, "packed_bytes": tot,
                                           "per_tri": per_tri(tot, T), "verts_bytes": b["info"]["verts"]["project_json_bytes"],
                                           "error_of_diagonal": pos.get("max_error_of_diagonal"),
                                           "decimals": pos.get("decimals")})
@@ -315,7 +324,7 @@ def main() -> None:
         T = len(b["lists"]["tris"]) // 4
         tot = sum(v["project_json_bytes"] for v in b["info"].values())
         bsp = next(r for r in b["res"].records if r.name == "bsp")
-        lossy["bsp.plane_decimals"].append({"value": dec, "triangles": T, "packed_bytes": tot, "per_tri": per_tri(tot, T),
+        lossy["plane_decimals"].append({"value": dec, "triangles": T, "packed_bytes": tot, "per_tri": per_tri(tot, T),
                                             "planes_bytes": b["info"]["bsp planes"]["project_json_bytes"],
                                             "inflation": bsp.accuracy.get("inflation", bsp.details.get("inflation"))})
     result["lossy"] = lossy

@@ -17,39 +17,32 @@ digits (base ``C = 92 - T``, bijective), so ``n`` is one symbol when ``n < T``, 
 ``n < T*(C + 1)`` and so on. Reading: ``a = 0; s = next; while s >= T: a = a*C + s - T + 1;
 s = next; n = a*T + s``.
 
-A packed list is the text ``sbpk1`` followed by varints with ``T = 46`` (the header):
-
-==================  ========================================================================
-field               meaning
-==================  ========================================================================
-crc                 CRC-32 of the list name (UTF-8) and everything after this field
-name length, name   the list's name (UTF-16 units, then the characters as they are)
-rows, stride        the list has ``rows * stride`` items, ``stride`` columns
-per column          ``mode`` then its parameters (below)
-==================  ========================================================================
+A packed list is the text ``sbpk1`` followed by varints with ``T = 46``: the CRC-32 of the list
+name (UTF-8) and everything after the CRC; the name's length in UTF-16 units and the name itself;
+the number of sections; per section its rows and stride (columns) and its column groups, each a
+header (mode, width, T, decimals d, zigzag(q0), palette size P, P zigzag palette entries) followed
+by its codes row by row (the group's varint parameter T); last, the sum of all codes. A list is
+one section, or two when it starts with a prefix of another shape (a BVH's root box).
 
 Column modes (every value is an integer ``q``; the item is ``q / 10^d``, exact in double
 precision because both are whole numbers below 2^53, so it is the same number the plain list's
 decimal text reads as):
 
-=======  =========  ====================================================  ======================
-mode     name       parameters                                            item from the code n
-=======  =========  ====================================================  ======================
-0        const      d, zigzag(q)                                          q / 10^d (no code)
-1        offset     T, d, zigzag(q0)                                      (q0 + n) / 10^d
-2        delta      T, d                                                  acc += unzigzag(n);
-                                                                          acc / 10^d
-3        index      T                                                     n = 0: m += 1, m;
-                                                                          else m + 1 - n
-4        palette    T, d, P, P times zigzag(q)                            palette[n + 1] / 10^d
-=======  =========  ====================================================  ======================
+=======  =========  =============================================================================
+mode     name       item from the code n
+=======  =========  =============================================================================
+0        const      q0 (no codes)
+1        offset     q0 + n
+2        delta      the previous value + q0 + unzigzag(n)
+3        index      n = 0: m + 1 (m, the highest index so far, is shared by the list's index
+                    columns and becomes m + 1); else m + 1 - n. Width > 1: adjacent columns.
+4        palette    palette[n + 1]
+=======  =========  =============================================================================
 
-``zigzag(q) = 2q`` for ``q >= 0``, ``-2q - 1`` below. ``m`` (the highest index so far) is shared
-by a list's index columns: with vertices numbered in the order the triangles first use them, a
-new vertex costs one symbol and a recent one a few. After the header come the codes row by row
-(columns in order; const columns have none), then the sum of all codes (a varint with
-``T = 46``). The loader checks the sum and that the text ended exactly there; :func:`unpack`
-also checks the CRC, so an edited or truncated string is an error naming the list.
+``zigzag(q) = 2q`` for ``q >= 0``, ``-2q - 1`` below. With vertices numbered in the order the
+triangles first use them, a new vertex costs one symbol and a recent one a few. The loader checks
+the sum and that the text ended exactly there; :func:`unpack` also checks the CRC, so an edited or
+truncated string is an error naming the list. docs/formats.md "Packed lists" is the reference.
 """
 
 from __future__ import annotations
@@ -559,8 +552,8 @@ def unpack(text: Any, name: str | None = None, *, max_items: int = 50_000_000) -
     for _ in range(nsec):
         R = r.bounded(HEADER_T, max_items, "row count")
         S = r.bounded(HEADER_T, 4096, "stride", 1)
-        if len(items) + R * S > max_items:
-            raise PackError(label, f"more than {max_items} items")
+        if len(items) + R * S > min(max_items, 10 * len(text) + 1_000_000):  # the loader's bound too
+            raise PackError(label, f"{len(items) + R * S} items is more than the text can hold")
         grid = np.zeros((R, S), np.float64)
         ints = np.zeros(S, bool)
         c0 = 0

@@ -203,7 +203,7 @@ def main() -> None:
                            "packed_bytes": pinf["project_json_bytes"], "packed": name in rows,
                            "plain_per_tri": per_tri(inf["project_json_bytes"], T),
                            "packed_per_tri": per_tri(pinf["project_json_bytes"], T),
-                           "coding": ", ".join(c["mode"] + (f"x{c['columns']}" if c["columns"] > 1 else "")
+                           "coding": ", ".join(c["mode"] + (f"×{c['columns']}" if c["columns"] > 1 else "")
                                                for c in rows[name]["columns"]) if name in rows else "plain",
                            "decode_blocks": rows[name]["decode_blocks"] if name in rows else 0}
             # lossless: the Python mirror of the loader gives the plain list back

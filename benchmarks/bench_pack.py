@@ -144,6 +144,46 @@ def ideas(first_use: dict, scene_order: dict, old_plain: dict, strides: dict, tr
     return {"rows": rows}
 
 
+# --------------------------------------------------------------------------- character lookups
+def lookup_costs(n: int = 400_000) -> dict:
+    """TurboWarp compiled, ns per character of three ways to read one: `letter of` alone, a costume
+    switch by name (case-sensitive, what the loader does) and `item # of` in a 92-item list
+    (case-insensitive, so it could not tell A from a; measured for comparison)."""
+    import random
+
+    import turbowarp
+    from bake.scratch import blocks as B
+    from bake.scratch.textimage import ALPHABET
+
+    rnd = random.Random(1)
+    text = "".join(rnd.choice(P.ALPHABET[:60]) for _ in range(n))
+    i, t = B.var("i"), B.var("t")
+    bodies = {
+        "letter_of": [B.set_var("s", B.letter_of(i, t)), B.change_var("i", 1)],
+        "costume": [B.switch_costume(B.letter_of(i, t)), B.set_var("s", B.item(B.costume_number(), "sym")),
+                    B.change_var("i", 1)],
+        "item_number_of": [B.set_var("s", B.item_number(B.letter_of(i, t), "alpha")), B.change_var("i", 1)],
+    }
+    files = []
+    tmp = Path(tempfile.mkdtemp(prefix="bench-lookup-"))
+    asset = sb3.Asset(sb3.SPRITE_SVG, "svg")
+    for name, body in bodies.items():
+        b = B.Builder(B.Scope("S", variables=["i", "s", "t"], lists=["sym", "alpha"]))
+        b.define("go", [], [B.set_var("i", 1), B.repeat(n, body)])
+        target = sb3.Target("S", variables={"i": 0, "s": 0, "t": text}, lists={"sym": list(range(94)),
+                                                                                "alpha": list(P.ALPHABET)},
+                            costumes=[sb3.Costume(ch, asset, 1, (1.0, 1.0)) for ch in ALPHABET], blocks=b.build(),
+                            layer_order=1, visible=False)
+        f = tmp / f"{name}.sb3"
+        f.write_bytes(sb3.write_sb3([sb3.Target("Stage", is_stage=True), target])[0])
+        files.append((name, f))
+    run = turbowarp.run(files, modes=("compiled",), repeat=3, action={"call": {"target": "S", "proccode": "go",
+                                                                               "args": []}})
+    return {r.id: {"ns_per_char": [round(x["stepSeconds"] / n * 1e9, 1) for x in r.runs],
+                   "median": round(float(np.median([x["stepSeconds"] / n * 1e9 for x in r.runs])), 1)}
+            for r in run.results} | {"characters": n, "load": load()}
+
+
 # --------------------------------------------------------------------------- runs
 def run_vm(jobs: list[dict]) -> list[dict]:
     r = subprocess.run(["node", str(REPO / "vm" / "run.js"), "--plan", "-"], input=json.dumps({"jobs": jobs}),
@@ -270,6 +310,8 @@ def main() -> None:
             result["turbowarp_skipped"] = why
         else:
             keys = list(baked)
+            result["lookups"] = lookup_costs()
+            print(f"character lookups, ns: {result['lookups']}", flush=True)
             for k in keys:  # one model at a time: every list is read back and compared
                 run = turbowarp.run([(k, baked[k][2]["path"])], modes=("compiled", "interpreted"), repeat=3,
                                     action={"call": {"target": "Mesh", "proccode": "unpack lists", "args": []}},

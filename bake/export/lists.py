@@ -8,6 +8,7 @@ list           stride  items
 verts          3       x, y, z of each vertex
 tris           4       v1, v2, v3 (1-based into verts), material (1-based into mat colors)
 mat colors     1       Scratch colour number of each material
+mat two-sided  1       1 if material m is two-sided, else 0 (when one is, or with a BSP tree)
 tri colors     1       colour number of each triangle (baked light, or material colour)
 vert colors    1       colour number of each vertex
 tri uvs        6       u1, v1, u2, v2, u3, v3 of each triangle (v up, 0..1 over the image)
@@ -99,6 +100,9 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
       list) for an engine to sample;
     * ``lightmap uvs``: when the scene has a lightmap atlas.
 
+    * ``mat two-sided``: when a material is two-sided, or with a BSP tree (its walk culls the
+      single-sided triangles that face away, so an engine needs to know which are which).
+
     Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages."""
     n = cfg.names
     has_fc = scene.face_colors is not None
@@ -107,6 +111,7 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
     has_uv = textured and scene.tri_uvs is not None
     has_lm = scene.tri_lightmap_uvs is not None
     tex = textures_in_project(scene)
+    two = any(bool(m.double_sided) for m in scene.materials)
 
     def pick(name: str, key: str, setting: str, available: bool, auto: bool, why_not: str) -> ListChoice:
         if setting == "yes":
@@ -127,6 +132,8 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
              "would sample the UVs; set textures.enabled = true to bake the texture, or export.uvs = \"yes\""
              if has_uv else "the scene has no textured triangles with UVs"),
         pick(n.lightmap_uvs, "export.lightmap_uvs", cfg.lightmap_uvs, has_lm, has_lm, "the scene has no lightmap"),
+        pick(n.two_sided, "export.two_sided", cfg.two_sided, two, two or "bsp" in scene.artefacts,
+             "every material is single-sided and there is no BSP tree"),
     )}
 
 
@@ -228,6 +235,11 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
 
     choice = choose_lists(scene, cfg)
+    if choice[n.two_sided].write:
+        two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
+        out.append(ScratchList(n.two_sided, two.astype(np.int64), 1,
+                               "1 if the material is two-sided (drawn from both sides), 0 if single-sided", "int"))
+
     if choice[n.triangle_colors].write:
         fc = scene.face_colors if scene.face_colors is not None else scene.triangle_albedo()
         vals, kind = _colour_list(fc[keep_mask], cfg.color_format)

@@ -137,7 +137,6 @@ class ReaderSpec:
     pen_size: float = 2.0
     loader: Any = None  # a bake.scratch.loader.LoaderSpec: unpack packed lists at the green flag
 
-
     def lists_read(self) -> list[str]:
         """The data lists the blocks read (they must exist in the project)."""
         out: list[str] = []

@@ -193,3 +193,22 @@ def test_into_a_sprite_stays_plain_and_empties_old_packed_texts(tmp_path):
     project, _ = sb3.load_project(res.scene.artefacts["outputs"]["p.sb3"])
     stage = {e[0]: e[1] for e in project["targets"][0]["lists"].values()}
     assert stage["packed lists"] == [] and stage["verts"] == outputs(res)[1]["verts"]
+
+
+def test_position_error_bound_is_reported_and_holds():
+    """report.json's export accuracy: the rounding bound (half the step, over the diagonal), and
+    every written coordinate is within it of the scene's."""
+    model = corpus_path("suzanne_obj", "suzanne.obj")
+    for prec in (2, 4):
+        res = run(model, export={"precision": prec, "vertex_order": "scene"})
+        _, lists, export = outputs(res)
+        pos = export.details["positions"]
+        diag = res.scene.scale()
+        assert export.accuracy["position_error"] == pytest.approx(pos["max_error"] / diag)
+        assert pos["step"] <= diag * 10.0 ** -prec < 10 * pos["step"]
+        written = np.asarray(lists["verts"]).reshape(-1, 3)
+        err = np.abs(written - res.scene.positions).max()
+        assert 0 < err <= pos["max_error"] * (1 + 1e-9)
+    from bake.sweep import error_of
+
+    assert error_of("export.precision")[0] == "position_error"

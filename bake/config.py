@@ -311,6 +311,7 @@ class ListNames:
     two_sided: str = "mat two-sided"
     quads: str = "quads"
     ngons: str = "ngons"
+    packed: str = "packed lists"  # with export.pack: the packed texts the loader decodes
 
 
 @dataclass
@@ -334,7 +335,18 @@ class ExportConfig:
     # Positions are rounded to this many significant digits of the model's size: a step of the
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md).
     precision: int = 5
+    # Vertex numbering: "first-use" = in the order the written triangles first use them (the
+    # index lists then pack to a symbol or two per corner); "scene" = the scene's order.
+    vertex_order: Literal["first-use", "scene"] = "first-use"
     color_format: Literal["rgb", "argb", "hex"] = "rgb"
+    # Packed lists (docs/formats.md "Packed lists"): in the .sb3/.sprite3/export.into project the
+    # numeric lists are stored as short strings in the list `names.packed`, and loader blocks in
+    # the reader sprite rebuild exactly the plain lists at the green flag (list files and
+    # lists.json stay plain). A list is packed only when that is smaller, and when it decodes to
+    # at most pack_max_items items (vanilla Scratch's `add to list` stops at 200,000; 0 = no
+    # limit, for TurboWarp).
+    pack: bool = False
+    pack_max_items: int = 200_000
     names: ListNames = field(default_factory=ListNames)
     txt: bool = True
     json: bool = True
@@ -867,6 +879,7 @@ def validate(cfg: Config) -> None:
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
     need(cfg.mesh.clean.weld_tolerance >= 0, "mesh.clean.weld_tolerance", "must be >= 0")
     need(1 <= cfg.export.precision <= 15, "export.precision", "must be between 1 and 15")
+    need(cfg.export.pack_max_items >= 0, "export.pack_max_items", "must be >= 0 (0 = no limit)")
     need(16 <= cfg.report.preview_width <= 2048, "report.preview_width", "must be between 16 and 2048")
     s = cfg.mesh.simplify
     need(s.target_triangles >= 0, "mesh.simplify.target_triangles", "must be >= 0")

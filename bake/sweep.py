@@ -55,7 +55,9 @@ STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
 ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
                   "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
                   "bsp": ("inflation", "triangles added by splits (fraction of the input)"),
-                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)")}
+                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)"),
+                  "export": ("position_error", "largest position rounding error, fraction of the diagonal "
+                                               "(a bound: half the rounding step)")}
 IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1)")
 PREVIEW_SIZE = (160, 120)
 

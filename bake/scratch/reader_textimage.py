@@ -23,6 +23,7 @@ def alphabet_costumes() -> list[sb3.Costume]:
 
 
 def textimage_part(r) -> None:
+    r.alphabet = True
     s, pos, c = r.v("_ts", ""), r.v("_tp"), r.v("_tc")
     out = r.lst("ti colors")
     hdr = r.lst("_ti header")

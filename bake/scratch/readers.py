@@ -165,6 +165,7 @@ class ReaderSpec:
             out += [self.bvh.nodes, self.bvh.tris, self.bvh.ids]
         if self.bsp and self.mesh:
             out += [self.bsp.nodes, self.bsp.planes]
+        out += [n for p in self.parts for n in getattr(p, "lists_read", lambda: [])()]
         return out
 
 
@@ -265,7 +266,10 @@ class ReaderBuilder:
     init)`` a list (a data list of the project is used as it is); ``set``/``change`` are the
     variable blocks (declaring the variable); ``define(proccode, args, body)`` adds a custom
     block (warp on); ``at_flag(nodes)`` adds blocks to the green-flag script of the .sb3, which
-    runs them before it renders; ``has(proccode)`` says whether a block is already defined."""
+    runs them before it renders (and renders only if ``flag_guard``, when a part sets one);
+    ``has(proccode)`` says whether a block is already defined; ``alphabet = True`` gives the sprite
+    the 94 character costumes (costume k + 1 is ``"!" .. "~"``[k], read case-sensitively by
+    ``switch costume to (letter)``)."""
 
     def __init__(self, spec: ReaderSpec, scope_lists: dict[str, str], stage_lists: dict[str, str],
                  target: str):
@@ -277,6 +281,8 @@ class ReaderBuilder:
         self.stage_lists = dict(stage_lists)
         self.procs: list[tuple[str, list[str], list[B.Node]]] = []
         self.flag: list[B.Node] = []
+        self.flag_guard: B.Boolean | None = None  # the green flag renders only when this holds
+        self.alphabet = False  # a part reads characters through the 94 alphabet costumes
 
     def v(self, name: str, init: Any = 0) -> B.VarRef:
         self.vars.setdefault(name, init)
@@ -447,8 +453,8 @@ def _render_blocks(r: ReaderBuilder) -> None:
     b, k = r.v("_b"), r.v("_k")
     fill = _fill_blocks(r)
     start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size)]
-    if r.spec.textimage:  # the decoder switches costumes; the pen needs the fence costume
-        start.append(B.switch_costume("fence"))
+    # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
+    start.append(B.switch_costume("fence"))
     start.append(B.call("project vertices"))
     if r.spec.bsp is not None:
         ranges = r.lst("draw ranges")
@@ -568,14 +574,15 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         script = list(r.flag)
         if spec.mesh and spec.renderer:
             cam = spec.camera
-            script += [B.set_var("cam x", cam.x), B.set_var("cam y", cam.y), B.set_var("cam z", cam.z),
-                       B.set_var("cam yaw", cam.yaw), B.set_var("cam pitch", cam.pitch), B.call("render")]
+            draw = [B.set_var("cam x", cam.x), B.set_var("cam y", cam.y), B.set_var("cam z", cam.z),
+                    B.set_var("cam yaw", cam.yaw), B.set_var("cam pitch", cam.pitch), B.call("render")]
+            script += [B.if_(r.flag_guard, draw)] if r.flag_guard is not None else draw
         if script:
             b.when_flag(script)
-    costumes = []
+    # the alphabet first (costume k + 1 is character k: the decoders read costume numbers), the
+    # pen's fence costume after it
+    costumes = alphabet_costumes() if r.alphabet else []
     if spec.mesh and spec.renderer:
         costumes.append(sb3.Costume("fence", sb3.Asset(FENCE_SVG, "svg"), 1, (FENCE / 2, FENCE / 2)))
-    if spec.textimage:
-        costumes += alphabet_costumes()
     return sb3.Target(name, lists=all_local, variables=dict(r.vars), costumes=costumes,
                       blocks=b.build(), layer_order=layer_order, visible=False, id_length=VAR_ID_LENGTH)

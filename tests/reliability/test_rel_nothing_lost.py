@@ -167,7 +167,7 @@ def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path,
     assert run_cli(["run", cfg, "--out", a, "--quiet", "--set", "lighting.threads=2"], capsys)[0] == 0
     assert run_cli(["run", cfg, "--out", b, "--quiet", "--set", "lighting.threads=1"], capsys)[0] == 0
     sa, sb = snapshot(a), snapshot(b)
-    assert sa.keys() == sb.keys() and {"m.sb3", "m.sprite3", "lists.json", "lists/vert_colors.txt",
+    assert sa.keys() == sb.keys() and {"m.sb3", "m.sprite3", "lists.json", "lists/tri_colors.txt",
                                        "lists/bvh_nodes.txt"} <= set(sa)
     for k in sa:
         if k not in ("report.json", "report.md", "report.html"):

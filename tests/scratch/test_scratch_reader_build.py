@@ -36,10 +36,10 @@ def test_reader_is_complete_valid_and_deterministic(layout):
     project, assets = sb3.load_project(data)
     assert sb3.validate_project(project, assets, project_json_bytes=pj) == []
     sprite = project["targets"][1]
-    # the pen's fence costume, then one costume per TextImage character, in alphabet order,
-    # sharing one asset
-    assert [c["name"] for c in sprite["costumes"]] == ["fence"] + list(ALPHABET)
-    assert len({c["md5ext"] for c in sprite["costumes"][1:]}) == 1 and len(assets) == 3
+    # one costume per TextImage character, in alphabet order (costume k + 1 is character k, which
+    # the decoders rely on), sharing one asset, then the pen's fence costume
+    assert [c["name"] for c in sprite["costumes"]] == list(ALPHABET) + ["fence"]
+    assert len({c["md5ext"] for c in sprite["costumes"][:-1]}) == 1 and len(assets) == 3
     # the reader's own names never take a data list's name
     own = {v[0] for v in sprite["lists"].values()} | {v[0] for v in sprite["variables"].values()}
     assert not own & set(DATA)

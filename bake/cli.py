@@ -63,6 +63,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
 
     prog = _Progress(quiet)
     cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
+    cfg.cache.out_dir = out  # and so does the default stage cache
     try:
         result = pipeline.run(cfg, progress=prog)
     finally:

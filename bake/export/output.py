@@ -13,11 +13,13 @@ from .write import depfile_text, write_atomic, write_outputs
 REPORT_FILES = ("report.json", "report.md", "report.html")
 
 
-def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) -> dict[str, Any]:
+def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
+           live_report: bool = False) -> dict[str, Any]:
     """Write every output under ``out_dir`` and return the report.
 
     Lists (and other data outputs) are written first, then the report, so a report on disk
     always describes complete outputs. Limits are checked by the caller (``--strict``).
+    ``live_report``: report.html reloads itself in a browser when rewritten (``bake watch``).
     """
     out_dir = Path(out_dir)
     files: dict[str, bytes] = dict(result.scene.artefacts.get("outputs", {}))
@@ -34,7 +36,7 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) ->
         from . import html
 
         w = result.config.report.preview_width
-        html.write(out_dir, width=w, height=max(1, w * 3 // 4))
+        html.write(out_dir, width=w, height=max(1, w * 3 // 4), live=live_report)
     if depfile is not None:
         deps = [p.resolve() for p in src.files_read]
         if result.config.source:

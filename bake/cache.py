@@ -99,6 +99,11 @@ def _h(*parts: Any) -> str:
 def tool_fingerprint() -> str:
     """What the code that computes a scene is: this package's source bytes, the libraries'
     versions, Python and the machine type (computed once per process)."""
+    return fingerprint_of(Path(__file__).resolve().parent)
+
+
+def fingerprint_of(root: Path) -> str:
+    """:func:`tool_fingerprint` of the package in ``root``."""
     from importlib import metadata
 
     h = hashlib.sha256()
@@ -110,8 +115,7 @@ def tool_fingerprint() -> str:
         except metadata.PackageNotFoundError:
             v = "-"
         h.update(f"{name}=={v}\n".encode())
-    root = Path(__file__).resolve().parent
-    for p in sorted(root.rglob("*.py")):
+    for p in sorted(Path(root).rglob("*.py")):
         h.update(p.relative_to(root).as_posix().encode() + b"\n")
         h.update(hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()
@@ -592,6 +596,7 @@ class Session:
         self.started_ns = time.time_ns()  # inputs modified after this are not trusted to be cached
         self.root = _h("scratch-bake stage cache", FORMAT, tool_fingerprint())
         self._digests: dict[str, str] = {}
+        self._stats: dict[str, tuple] = {}  # (mtime, size, inode) when the digest was taken
         self._listings: dict[str, str] = {}
         self.warnings: list[str] = []
         self.stored: list[str] = []
@@ -601,8 +606,18 @@ class Session:
     def _digest(self, path: str) -> str:
         d = self._digests.get(path)
         if d is None:
+            self._stats[path] = _stat(path)
             d = self._digests[path] = file_digest(path)
         return d
+
+    def _changed(self, path: str) -> bool:
+        """Did ``path`` change while this bake used it? Its (mtime, size, inode) moved since its
+        digest was taken, or (a file first hashed after the stage that read it) it was modified
+        after the bake started (an mtime in the future is clock skew, not a change)."""
+        now = _stat(path)
+        if path in self._stats:
+            return now != self._stats[path]
+        return now is not None and self.started_ns <= now[0] <= time.time_ns()
 
     def _listing(self, folder: str) -> str:
         d = self._listings.get(folder)
@@ -700,11 +715,7 @@ class Session:
             return None, covered, None
         files = self.deps_of(scene, covered)
         for f in files:
-            try:
-                changed = os.stat(f).st_mtime_ns >= self.started_ns
-            except OSError:
-                changed = False
-            if changed:
+            if self._changed(f):
                 self.broken = True
                 return None, covered, (f"stage cache: {f} changed during the bake; this bake's stages from "
                                        f"{name} on are not cached")
@@ -731,6 +742,14 @@ class Session:
             return self.store.trim()
         except OSError:
             return []
+
+
+def _stat(path: str) -> tuple | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_mtime_ns, st.st_size, st.st_ino)
 
 
 def _check_payload(payload: dict, names: list[str]) -> None:

@@ -94,6 +94,8 @@ enabled = true
 samples = 8
 [bvh]
 enabled = true
+[report]
+html = false  # (time: the previews are tested elsewhere)
 """
 
 CONFIG_B = """
@@ -121,6 +123,8 @@ enabled = true
 samples = 8
 [bsp]
 enabled = true
+[report]
+html = false
 """
 
 # (the stage that must run again, a key of it to change); None = nothing changed
@@ -199,7 +203,8 @@ def test_a_cached_bake_writes_the_same_bytes_as_a_cold_one(primed, tmp_path, whi
 
 def test_the_report_says_which_stages_came_from_the_cache(primed, tmp_path, capsys):
     root, cfgs = primed
-    assert cli.main(["run", str(cfgs["b"]), "--out", str(tmp_path / "o"), "--set", "bsp.seed=7"]) == 0
+    assert cli.main(["run", str(cfgs["b"]), "--out", str(tmp_path / "o"), "--set", "bsp.seed=7",
+                     "--set", "report.html=true"]) == 0
     text = capsys.readouterr().out
     rep = json.loads((tmp_path / "o" / "report.json").read_text())
     loaded = rep["cache"]["from_cache"]

@@ -126,7 +126,11 @@ def rebake(tmp: Path, name: str, cfg: Path, sets: list[str], repeat: int) -> dic
           f"changed {cli_hit:.2f} s", flush=True)
     med = {k: statistics.median(r[k] for r in rows)
            for k in ("cold", "rebake", "all_cached", "cold_without_cache", "cpu_cold", "cpu_rebake")}
+    last = rows[-1]["stages"]
+    stage_rows = [{"stage": k, "cold": v["cold"], "rebake": v["rebake"], "all_cached": v["all_cached"],
+                   "rebake_how": "from the cache" if v["rebake_from_cache"] else "ran"} for k, v in last.items()]
     return {"config": str(cfg.relative_to(REPO)), "set": sets, "change": CHANGE, "runs": rows,
+            "stages_last_run": stage_rows,
             "median_seconds": med, "rebake_over_cold": med["rebake"] / med["cold"],
             "cpu_rebake_over_cold": med["cpu_rebake"] / med["cpu_cold"],
             "goal_rebake_over_cold": 0.15, "goal_met": med["rebake"] / med["cold"] <= 0.15,
@@ -170,7 +174,9 @@ def sweeps(tmp: Path, repeat: int, skip_base: bool) -> dict:
         res = {"command": f"bake sweep configs/bunny.toml --set {BUNNY_SETS[0]} --vary lighting.ao.samples=16,32,64,128",
                "today_seconds": before, "new_seconds": after,
                "rows_cached_stages": [r["cached_stages"] for r in table["rows"]]}
+        res["new_median_seconds"] = statistics.median(after)
         if before:
+            res["today_median_seconds"] = statistics.median(before)
             res["new_over_today"] = statistics.median(after) / statistics.median(before)
             res["goal_new_over_today"] = 0.40
             res["goal_met"] = res["new_over_today"] <= 0.40
@@ -260,6 +266,13 @@ def main(argv: list[str] | None = None) -> int:
         print("3. bake watch", flush=True)
         result["watch"] = watch_latency(tmp)
         result["load"]["end"] = load()
+    result["summary"] = {}
+    for name, r in result["rebake"].items():
+        m = r["median_seconds"]
+        result["summary"][name] = {
+            "cold": m["cold"], "rebake": m["rebake"], "all_cached": m["all_cached"], "share": r["rebake_over_cold"],
+            "cpu_share": r["cpu_rebake_over_cold"], "cli_cold": r["cli"]["cold"], "cli_rebake": r["cli"]["rebake"],
+            "cli_share": r["cli"]["rebake_over_cold"], "goal": "met" if r["goal_met"] else "not met"}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     for name, r in result["rebake"].items():

@@ -434,15 +434,30 @@ def decode_entry(buf: np.ndarray, key: str, stage: str) -> Any:
 
 
 # --------------------------------------------------------------------------- stores
-class DiskStore:
-    """Entries and manifests as files in one folder, least recently used dropped past ``max_bytes``."""
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
-    def __init__(self, root: Path, max_bytes: int):
+
+_MODE = 0o666 & ~_umask()  # files get the usual mode, not mkstemp's 0o600
+
+
+class DiskStore:
+    """Entries and manifests as files in one folder, least recently used dropped past ``max_bytes``.
+
+    ``lazy``: a folder (the bake's output folder) that, while it does not exist, must not be
+    created by a bake that fails: writes wait in memory until :meth:`flush` (the bake succeeded)."""
+
+    def __init__(self, root: Path, max_bytes: int, lazy: Path | None = None, label: str | None = None):
         self.root = Path(root)
         self.max_bytes = int(max_bytes)
+        self.label = label or str(self.root)
+        self.pending: list[tuple[str, list[bytes]]] | None = [] if lazy is not None and not Path(lazy).exists() \
+            else None
 
     def describe(self) -> str:
-        return str(self.root)
+        return self.label
 
     def _path(self, name: str) -> Path:
         return self.root / name
@@ -464,9 +479,16 @@ class DiskStore:
         return buf
 
     def write(self, name: str, chunks: list[bytes]) -> None:
+        if self.pending is not None:
+            self.pending.append((name, chunks))
+            return
         self.root.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=TMP_SUFFIX, dir=self.root)
         try:
+            try:
+                os.fchmod(fd, _MODE)
+            except OSError:
+                pass
             with os.fdopen(fd, "wb") as f:
                 for c in chunks:
                     f.write(c)
@@ -483,6 +505,12 @@ class DiskStore:
             self._path(name).unlink()
         except OSError:
             pass
+
+    def flush(self) -> None:
+        """Write what waited for the bake to succeed."""
+        pending, self.pending = self.pending, None
+        for name, chunks in pending or []:
+            self.write(name, chunks)
 
     def trim(self) -> list[str]:
         """Delete least recently used files until the folder is within its cap (and temporary files
@@ -532,6 +560,9 @@ class MemoryStore:
     def remove(self, name: str) -> None:
         self.files.pop(name, None)
 
+    def flush(self) -> None:
+        pass
+
     def trim(self) -> list[str]:
         return []
 
@@ -574,8 +605,9 @@ class StageCache:
             root = Path(d).expanduser()
             if not root.is_absolute():
                 root = Path(cfg.base_dir) / root
-        elif c.out_dir is not None:
-            root = Path(c.out_dir) / SUBDIR
+        elif c.out_dir is not None:  # a failed first bake into a new folder must not create it
+            return cls(DiskStore(Path(c.out_dir) / SUBDIR, int(c.max_mb * 1024 * 1024), lazy=Path(c.out_dir),
+                                 label=SUBDIR.as_posix()))  # (the report names it within the folder)
         else:
             return None
         return cls(DiskStore(root, int(c.max_mb * 1024 * 1024)))
@@ -737,7 +769,15 @@ class Session:
             warning = f"stage cache: cannot write to {self.store.describe()} ({e.strerror or e}); not cached"
         return key, covered, warning
 
-    def trim(self) -> list[str]:
+    def finish(self) -> list[str]:
+        """The bake succeeded: write what waited, then keep the store under its cap. Returns the
+        names of the entries dropped."""
+        try:
+            self.store.flush()
+        except OSError as e:
+            self.warnings.append(f"stage cache: cannot write to {self.store.describe()} ({e.strerror or e}); "
+                                 "not cached")
+            self.stored.clear()
         try:
             return self.store.trim()
         except OSError:

@@ -196,8 +196,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         if progress:
             progress(spec.name, "done")
     if session is not None:
+        info["dropped"] = len(session.finish())
         info["stored"] = list(session.stored)
-        info["dropped"] = len(session.trim())
     return BakeResult(scene=scene, records=records, skipped=skipped,
                       seconds=time.perf_counter() - t0, config=cfg, cache=info)
 

@@ -247,14 +247,16 @@ def test_report_html_reloads_itself_in_a_browser_when_the_watch_writes_a_new_one
     info = html.write(out, width=64, height=48, live=True)
     cdp = CDP(exe, (out / "report.html").as_uri(), tmp_path / "profile")
     try:
-        def page_state():
+        def evaluate(expression):
             targets = cdp.call("Target.getTargets")["targetInfos"]
             page = next(t for t in targets if t["type"] == "page")
             sid = cdp.call("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})["sessionId"]
-            r = cdp.call("Runtime.evaluate", {"expression": "document.readyState + ' ' + performance.timeOrigin + ' ' + "
-                                              "(document.documentElement.outerHTML.match(/var s='(\\w+)'/)||[])[1]",
-                                              "returnByValue": True}, session=sid)
+            r = cdp.call("Runtime.evaluate", {"expression": expression, "returnByValue": True}, session=sid)
             return r["result"].get("value", "")
+
+        def page_state():
+            return evaluate("document.readyState + ' ' + performance.timeOrigin + ' ' + "
+                            "(document.documentElement.outerHTML.match(/var s='(\\w+)'/)||[])[1]")
 
         def wait_for(pred, what):
             end = time.monotonic() + 60
@@ -269,11 +271,14 @@ def test_report_html_reloads_itself_in_a_browser_when_the_watch_writes_a_new_one
         origin = state.split()[1]
         time.sleep(1.5)  # polls report-live.js several times: the same stamp, no reload
         assert page_state().split()[1] == origin
+        evaluate("window.scrollTo(0, 300); window.scrollY")  # the author was reading further down
         # a new bake's report (here: the same folder with another preview size)
         info2 = html.write(out, width=80, height=60, live=True)
         assert info2["live_stamp"] != info["live_stamp"]
         state = wait_for(lambda v: v.startswith("complete") and v.endswith(info2["live_stamp"]), "reloaded page")
         assert state.split()[1] != origin  # a new document, not the old one patched
+        time.sleep(0.5)
+        assert evaluate("window.scrollY") == 300  # the reload keeps the place on the page
     finally:
         cdp.close()
 

@@ -382,7 +382,7 @@ def live_script(stamp: str) -> str:
     browser loads scripts from ``file://`` pages, which it refuses to ``fetch``; the query defeats
     its cache). The watch rewrites report-live.js after each report.html with a call naming the
     new page's stamp (a hash of the page); a page whose own stamp differs reloads itself, so it
-    shows the new report (the browser keeps the scroll position). Without the file (the watch
+    shows the new report (Chromium keeps the scroll position: tests/test_watch.py). Without the file (the watch
     ended) the element fails to load and nothing happens."""
     return ("<script>/* bake watch: reload when a new report is written */(function(){var s='%s';"
             "window.bakeReportStamp=function(t){if(t!==s){location.reload();}};"

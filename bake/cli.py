@@ -55,9 +55,16 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
         print(f"  wrote {out}/ (report.md, report.json{extra}, lists)")
     if strict or cfg.report.strict:
         bad = [lim for lim in rep["limits"] if not lim["ok"]]
+        problems = rep.get("problems", [])
+        what = []
         if bad:
-            raise LimitError(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
-                             f"{bad[0]['limit']}; see {out / 'report.md'}")
+            what.append(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
+                        f"{bad[0]['limit']}")
+        if problems:
+            what.append(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
+                        f"{problems[0]['message']}")
+        if what:
+            raise LimitError("; ".join(what) + f"; see {out / 'report.md'}")
     return rep
 
 
@@ -205,13 +212,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
-    cfg = config_mod.Config()
-    for key in config_mod.all_keys():
-        try:
-            val = config_mod.get_key(cfg, key)
-        except BakeError:
-            val = "?"
-        print(f"{key} = {json.dumps(val) if not isinstance(val, list) else json.dumps(config_mod.to_dict(val))}")
+    # arrays of tables list their fields too: lighting.lights[].kind = "sun", ...
+    for key, val in config_mod.key_defaults():
+        print(f"{key} = {json.dumps(val)}")
     return 0
 
 
@@ -233,7 +236,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")
     r.add_argument("--out", help="output folder (default: bake-out/<name>)")
     r.add_argument("--depfile", help="write Make-style dependencies to this file")
-    r.add_argument("--strict", action="store_true", help="exit 4 if a Scratch limit is exceeded")
+    r.add_argument("--strict", action="store_true",
+                   help="exit 4 if a Scratch limit is exceeded or the bake has a problem (e.g. all-black lighting)")
     common(r)
     r.set_defaults(func=cmd_run)
 

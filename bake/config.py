@@ -147,7 +147,7 @@ class BVHConfig:
     quant_bits: int = 6  # bits per quantised box plane (2..8)
     # list coordinates are rounded to a power of ten <= diagonal * 10^-precision (0 = exact)
     precision: int = 5
-    high_seconds: float = 20.0  # time budget of the reinsertion optimiser (quality = "high")
+    high_effort: float = 10.0  # work budget of the reinsertion optimiser (quality = "high"), millions of node visits
     list_prefix: str = "bvh"  # lists are "<prefix> nodes", "<prefix> tris", "<prefix> tri ids"
 
 
@@ -305,6 +305,7 @@ class ListNames:
     vertex_colors: str = "vert colors"
     uvs: str = "tri uvs"
     lightmap_uvs: str = "lightmap uvs"
+    two_sided: str = "mat two-sided"
     quads: str = "quads"
     ngons: str = "ngons"
 
@@ -320,11 +321,15 @@ class ExportConfig:
     vertex_colors: Literal["auto", "yes", "no"] = "auto"
     uvs: Literal["auto", "yes", "no"] = "auto"
     lightmap_uvs: Literal["auto", "yes", "no"] = "auto"  # auto: when the scene has a lightmap atlas
+    # Which materials are two-sided (1) or single-sided (0), one item per material in "mat colors"
+    # order. auto: when a material is two-sided or a BSP tree is written (its walk skips
+    # single-sided triangles that face away); without the list every material is single-sided.
+    two_sided: Literal["auto", "yes", "no"] = "auto"
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
-    # Positions are rounded to this many significant digits of the model's size: a step of
-    # diagonal * 10^-precision.
+    # Positions are rounded to this many significant digits of the model's size: a step of the
+    # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md).
     precision: int = 5
     color_format: Literal["rgb", "argb", "hex"] = "rgb"
     names: ListNames = field(default_factory=ListNames)
@@ -350,7 +355,7 @@ class ExportConfig:
 
 @dataclass
 class ReportConfig:
-    strict: bool = False  # an exceeded limit makes the bake exit non-zero
+    strict: bool = False  # like --strict: an exceeded limit or a problem (all-black lighting) exits 4
     html: bool = True  # write report.html (previews, limit bars, stage table, sweeps)
     preview_width: int = 320  # pixels per preview image (height is 3/4 of it)
 
@@ -434,6 +439,30 @@ def _suggest(key: str, candidates: list[str]) -> str:
     return f"; did you mean '{close[0]}'?" if close else ""
 
 
+def _typos(a: str, b: str) -> int:
+    """Edits (insert, delete, substitute, swap two neighbours) from ``a`` to ``b``: ``angel`` is
+    one swap from ``angle`` and two edits from ``range`` (difflib rates both alike). Names are a
+    few letters long, so the quadratic table is nothing."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
+
+
+def _closest_field(name: str, fields: list[str]) -> list[str]:
+    """The field a misspelt ``name`` most likely meant (fewest edits, then difflib's ratio), if
+    it is within a third of the name's length; else difflib's closest (``[]`` if none)."""
+    if not fields:
+        return []
+    best = min(fields, key=lambda f: (_typos(name, f), -difflib.SequenceMatcher(None, name, f).ratio()))
+    if _typos(name, best) <= max(1, len(name) // 3):
+        return [best]
+    return difflib.get_close_matches(name, fields, n=1, cutoff=0.5)
+
+
 class _Where:
     """Finds the line of a dotted key in the TOML text, for messages."""
 
@@ -444,6 +473,9 @@ class _Where:
     def line_of(self, key: str) -> int | None:
         if not self.lines:
             return None
+        m = re.match(r"^(?P<table>[\w.]+)\[(?P<index>\d+)\](?:\.(?P<rest>.+))?$", key)
+        if m:  # a field of the n-th [[table]] (e.g. lighting.lights[1].angle)
+            return self._element_line(m.group("table"), int(m.group("index")), m.group("rest"))
         parts = key.split(".")
         last = re.escape(parts[-1].split("[")[0])
         section = ".".join(parts[:-1])
@@ -464,6 +496,37 @@ class _Where:
                 if found is None:
                     found = i
         return found
+
+    def _element_line(self, table: str, index: int, rest: str | None) -> int | None:
+        """The line of ``rest`` (a field, or None for the element itself) in the ``index``-th
+        ``[[table]]`` block; for an inline array (``lights = [{...}, ...]``) the line naming the
+        field after the array starts, else the array's line."""
+        seen = -1
+        start = None
+        for i, raw in enumerate(self.lines, 1):
+            s = raw.strip()
+            h = re.match(r"^\[\[\s*([^\]]+?)\s*\]\]$", s)
+            if start is not None and re.match(r"^\[", s):
+                break  # the next table header ends the block
+            if h and h.group(1).replace(" ", "") == table:
+                seen += 1
+                if seen == index:
+                    start = i
+                    if rest is None:
+                        return i
+            elif start is not None and rest is not None and re.match(rf"^{re.escape(rest.split('.')[0])}\s*=", s):
+                return i
+        if start is not None:
+            return start
+        name = table.rsplit(".", 1)[-1]
+        for i, raw in enumerate(self.lines, 1):  # inline: lights = [{...}] or lighting.lights = [...]
+            if re.match(rf"^\s*(?:[\w.]*\.)?{re.escape(name)}\s*=", raw):
+                if rest is not None:
+                    for j in range(i, len(self.lines) + 1):
+                        if re.search(rf"\b{re.escape(rest.split('.')[0])}\s*=", self.lines[j - 1]):
+                            return j
+                return i
+        return None
 
     def error(self, key: str, msg: str) -> ConfigError:
         return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
@@ -534,6 +597,11 @@ def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) 
         attr = _ALIASES.get(raw_key, raw_key)
         key = prefix + raw_key
         if attr not in fields:
+            if re.search(r"\[\d+\]\.$", prefix):  # inside [[...]]: the element's own fields, by name
+                close = _closest_field(raw_key, all_keys(cls))
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                raise where.error(key, f"unknown key{hint} (an entry of [[{prefix.split('[')[0]}]] has "
+                                  + ", ".join(all_keys(cls)) + ")")
             known = all_keys(Config)
             sub = [k for k in known if k.startswith(prefix)] if prefix else known
             raise where.error(key, "unknown key" + _suggest(key, sub or known))
@@ -574,7 +642,12 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None,
         apply_override(cfg, ov)
     if cfg.export.into:  # relative to the config file, like input.path
         cfg.export.into = str(cfg.base_dir / cfg.export.into)
-    validate(cfg)
+    try:
+        validate(cfg)
+    except ConfigError as e:  # name the key's line in the file
+        if e.line is None and e.key is not None and text is not None:
+            raise ConfigError(e.message, path=src, line=_Where(text, src).line_of(e.key), key=e.key) from None
+        raise
     return cfg
 
 
@@ -591,6 +664,10 @@ def apply_override(cfg: Config, assignment: str) -> None:
         raise ConfigError(f"--set expects section.key=value, got {assignment!r}")
     key, text = assignment.split("=", 1)
     key = key.strip()
+    m = re.match(r"^(?P<head>[\w.]+)\[(?P<n>\d+)\]\.(?P<rest>[\w.]+)$", key)
+    if m:  # a field of one element of an array of tables: lighting.lights[0].angle=2
+        _override_element(cfg, m.group("head"), int(m.group("n")), m.group("rest"), parse_value(text.strip()))
+        return
     parts = key.split(".")
     nested: dict = {}
     cur = nested
@@ -601,9 +678,66 @@ def apply_override(cfg: Config, assignment: str) -> None:
     _build(Config, nested, "", where, base=cfg)
 
 
-def get_key(cfg: Config, key: str) -> Any:
+def _element_class(obj: Any, attr: str, key: str) -> type:
+    """The dataclass of the elements of the list field ``attr`` (e.g. LightConfig)."""
+    t = get_type_hints(type(obj)).get(attr) if dataclasses.is_dataclass(obj) else None
+    args = get_args(t) if t is not None and get_origin(t) in (list, typing.List) else ()
+    if not args or not dataclasses.is_dataclass(args[0]):
+        raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
+    return args[0]
+
+
+def _override_element(cfg: Config, head: str, n: int, rest: str, value: Any) -> None:
+    """``--set lighting.lights[n].field=value``: set a field of element ``n``; ``n`` equal to
+    the number of elements adds one with the defaults."""
+    parts = head.split(".")
+    obj: Any = get_key(cfg, ".".join(parts[:-1])) if len(parts) > 1 else cfg
+    attr = _ALIASES.get(parts[-1], parts[-1])
+    cls = _element_class(obj, attr, f"{head}[{n}].{rest}")
+    items = getattr(obj, attr)
+    if n > len(items):
+        raise ConfigError(f"there are {len(items)} element(s); [{len(items)}] adds one", key=f"{head}[{n}]")
+    elem = items[n] if n < len(items) else cls()
+    nested: dict = {}
+    cur = nested
+    rparts = rest.split(".")
+    for p in rparts[:-1]:
+        cur = cur.setdefault(p, {})
+    cur[rparts[-1]] = value
+    _build(cls, nested, f"{head}[{n}].", _Where(None, None), base=elem)
+    if n == len(items):
+        items.append(elem)
+
+
+def key_defaults() -> list[tuple[str, Any]]:
+    """Every key with its default, for ``bake keys``: the keys of :func:`all_keys`, and for an
+    array of tables (``[[lighting.lights]]``) each field of one element as ``lighting.lights[].kind``."""
+    cfg = Config()
+    out: list[tuple[str, Any]] = []
+    for key in all_keys():
+        val = get_key(cfg, key)
+        out.append((key, to_dict(val)))
+        *path, last = key.split(".")
+        owner = get_key(cfg, ".".join(path)) if path else cfg
+        t = get_type_hints(type(owner)).get(_ALIASES.get(last, last))
+        args = get_args(t) if get_origin(t) in (list, typing.List) else ()
+        if args and dataclasses.is_dataclass(args[0]):
+            elem = args[0]()
+            out.extend((f"{key}[].{k}", to_dict(get_key(elem, k))) for k in all_keys(args[0]))
+    return out
+
+
+def get_key(cfg: Any, key: str) -> Any:
+    """The value of a dotted key (``lighting.lights[0].angle`` reads one element)."""
     obj: Any = cfg
     for p in key.split("."):
+        m = re.match(r"^(\w+)\[(\d+)\]$", p)
+        if m and dataclasses.is_dataclass(obj) and m.group(1) in _fields(type(obj)):
+            items = getattr(obj, m.group(1))
+            if not isinstance(items, list) or int(m.group(2)) >= len(items):
+                raise ConfigError(f"no element {m.group(2)} (there are {len(items)})", key=key)
+            obj = items[int(m.group(2))]
+            continue
         attr = _ALIASES.get(p, p)
         if not dataclasses.is_dataclass(obj) or attr not in _fields(type(obj)):
             raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
@@ -681,5 +815,5 @@ def numeric_keys() -> list[str]:
     return out
 
 
-__all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "to_dict", "numeric_keys",
+__all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "key_defaults", "to_dict", "numeric_keys",
            "parse_value", "Optional"]

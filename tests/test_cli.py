@@ -100,6 +100,27 @@ def test_strict_limit_exit_4_still_writes_report(tmp_path, capsys):
     assert code == 0  # without --strict an exceeded limit is a warning in the report
 
 
+def test_all_black_lit_bake_warns_and_strict_exits_4(tmp_path, capsys):
+    """Issue 17, item 1: a lit bake with nothing lighting the scene says so in the summary and
+    the report, and --strict fails it with exit status 4 (outputs still written)."""
+    model = grid_obj(tmp_path / "grid.obj", 3)
+    args = ["run", str(model), "--out", str(tmp_path / "o"), "--set", "lighting.enabled=true"]
+    code, out, err = run(args, capsys)
+    assert code == 0, err
+    assert "PROBLEM: every lit colour is black: no light source" in out
+    assert "1 PROBLEM(S) (--strict fails the bake)" in out
+    rep = json.loads((tmp_path / "o/report.json").read_text())
+    assert rep["problems"] == [{"stage": "lighting", "message": rep["problems"][0]["message"]}]
+    names = {e["name"]: e for e in rep["effects"]}
+    assert not names["lighting.light sources"]["ran"] and names["lighting.all black"]["ran"]
+    assert set(json.loads((tmp_path / "o/lists.json").read_text())["lists"]["tri colors"]) == {0}
+    code, out, err = run(args + ["--strict"], capsys)
+    assert code == 4 and "problem(s) under --strict" in err and "every lit colour is black" in err
+    assert (tmp_path / "o/report.json").exists()
+    code, out, err = run(args + ["--strict", "--set", "lighting.ambient=[0.5, 0.5, 0.5]"], capsys)
+    assert code == 0 and "PROBLEM" not in out, err
+
+
 def test_inspect(tmp_path, capsys):
     model = grid_obj(tmp_path / "grid.obj", 3)
     code, out, err = run(["inspect", str(model), "--json"], capsys)

@@ -8,6 +8,7 @@ list           stride  items
 verts          3       x, y, z of each vertex
 tris           4       v1, v2, v3 (1-based into verts), material (1-based into mat colors)
 mat colors     1       Scratch colour number of each material
+mat two-sided  1       1 if material m is two-sided, else 0 (when one is, or with a BSP tree)
 tri colors     1       colour number of each triangle (baked light, or material colour)
 vert colors    1       colour number of each vertex
 tri uvs        6       u1, v1, u2, v2, u3, v3 of each triangle (v up, 0..1 over the image)
@@ -124,6 +125,11 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         mc = np.array([m.color for m in scene.materials], dtype=np.float64).reshape(-1, 4)
         vals, kind = _colour_list(mc, cfg.color_format)
         out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
+
+    two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
+    if cfg.two_sided == "yes" or (cfg.two_sided == "auto" and (two.any() or "bsp" in scene.artefacts)):
+        out.append(ScratchList(n.two_sided, two.astype(np.int64), 1,
+                               "1 if the material is two-sided (drawn from both sides), 0 if single-sided", "int"))
 
     want_tri = cfg.triangle_colors == "yes" or (cfg.triangle_colors == "auto" and scene.face_colors is not None)
     if want_tri:

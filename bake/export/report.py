@@ -10,6 +10,8 @@
 * ``lists``: name -> {items, stride, bytes, file, doc}; ``bytes`` is what the list adds to project.json
 * ``limits``: list of {name, value, limit, ok, note}
 * ``effects``: list of {name, ran, reason, ...}: every stage and effect that ran or was skipped, and why
+* ``problems``: list of {stage, message}: what makes ``--strict`` fail besides a limit (e.g. a lit
+  bake whose colours are all black); each is also among its stage's warnings
 * ``outputs``: relative path -> "written" | "unchanged" | "removed"
 * ``seconds``: wall time of the whole bake
 * ``cache``: the stage cache's part (``where``, ``from_cache``: the stages loaded rather than run,
@@ -85,6 +87,7 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "lists": lists,
         "limits": limits,
         "effects": effects,
+        "problems": [{"stage": r.name, "message": m} for r in result.records for m in r.problems],
         "outputs": dict(sorted((outputs or {}).items())),
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
@@ -160,14 +163,18 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         acc = " ".join(f"{k}={v:.3g}" for k, v in st["accuracy"].items() if isinstance(v, (int, float)))
         note = cache_note(st)
         lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}" + (f"  [{note}]" if note else ""))
+        problems = set(st.get("problems", []))
         for w in st["warnings"]:
-            lines.append(f"    warning: {w}")
+            lines.append(f"    {'PROBLEM' if w in problems else 'warning'}: {w}")
     total = sum(v["bytes"] for v in report["lists"].values())
     lines.append(f"  lists: {len(report['lists'])}, {sum(v['items'] for v in report['lists'].values())} items, "
                  f"{_fmt_bytes(total)} in project.json")
     for lim in report["limits"]:
         if not lim["ok"]:
             lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']} > {lim['limit']}")
+    if report.get("problems"):
+        lines.append(f"  {len(report['problems'])} PROBLEM(S) (--strict fails the bake): "
+                     + "; ".join(f"{p['stage']}: {p['message']}" for p in report["problems"]))
     pj = [lim for lim in report["limits"] if lim["name"].startswith("project.json")]
     if pj:
         lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])})")

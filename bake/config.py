@@ -257,6 +257,9 @@ class LightmapConfig:
     cache_dir: str = ""
     # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
     out_dir: Path | None = field(default=None, metadata={"internal": True})
+    # Whether the lighting stage will fill the atlas (lighting.target = "lightmap"; not a TOML key:
+    # the pipeline sets it): the memory estimate then counts the texel bake too.
+    lit: bool = field(default=True, metadata={"internal": True})
 
 
 @dataclass
@@ -388,6 +391,8 @@ class Config:
     # Where the config came from (not a TOML key): paths in it are relative to this folder.
     base_dir: Path = field(default_factory=Path.cwd, metadata={"internal": True})
     source: Path | None = field(default=None, metadata={"internal": True})
+    # Every key set explicitly, and where: "file" (the config) or the --set assignment that set it.
+    given: dict[str, str] = field(default_factory=dict, metadata={"internal": True})
 
 
 @dataclass(frozen=True)
@@ -428,7 +433,60 @@ def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
     return out
 
 
-def _suggest(key: str, candidates: list[str]) -> str:
+# Words authors reach for, and the key bake calls that thing (matched per dotted component).
+_SYNONYMS = {"occlusion": "ao", "ambient_occlusion": "ao", "ambientocclusion": "ao", "ssao": "ao",
+             "shadow": "shadows", "bounce": "bounces", "gi": "bounces", "indirect": "bounces",
+             "light": "lights", "lamp": "lights", "lamps": "lights", "simplification": "simplify",
+             "decimate": "simplify", "decimation": "simplify", "texture": "textures", "uv": "uvs",
+             "lightmaps": "lightmap", "colour": "color", "colours": "colors", "centre": "center",
+             "triangulation": "triangulate", "cleanup": "clean", "output": "export", "model": "input"}
+
+
+def _children(cls: Any) -> dict[str, Any]:
+    """TOML name -> type of each key of a section (list[Section] as Section)."""
+    hints = get_type_hints(cls)
+    out = {}
+    for name in _fields(cls):
+        t = hints[name]
+        if get_origin(t) in (list, typing.List) and get_args(t) and dataclasses.is_dataclass(get_args(t)[0]):
+            t = get_args(t)[0]
+        out[_toml_name(name)] = t
+    return out
+
+
+def _walk_suggestion(parts: list[str], *, table: bool) -> str | None:
+    """Mend a dotted key one component at a time, from the top: a known name stays, a synonym
+    or the closest name at that level replaces an unknown one (``lightning.enabled`` ->
+    ``lighting.enabled``, ``lighting.occlusion`` -> ``lighting.ao``)."""
+    cls: Any = Config
+    out = []
+    for i, raw in enumerate(parts):
+        if not dataclasses.is_dataclass(cls):
+            return None
+        name, _, index = raw.partition("[")
+        kids = _children(cls)
+        last = i == len(parts) - 1
+        # at the last component of a table, or on the way down, only sections fit; else keys
+        fits = [k for k, t in kids.items() if dataclasses.is_dataclass(t) == (table or not last)]
+        if name not in kids or (last and name not in fits):
+            syn = _SYNONYMS.get(name.lower())
+            if syn in fits:
+                name = syn
+            else:
+                close = difflib.get_close_matches(name, fits, n=1, cutoff=0.6)
+                if not close:
+                    return None
+                name = close[0]
+        out.append(name + (f"[{index}" if index else ""))
+        cls = kids[name]
+    return ".".join(out)
+
+
+def _suggest(key: str, candidates: list[str], *, table: bool = False) -> str:
+    """``; did you mean 'x'?`` for an unknown ``key`` (a table: ``table=True``), or ""."""
+    mended = _walk_suggestion(key.split("."), table=table)
+    if mended and mended != key:
+        return f"; did you mean [{mended}]?" if table else f"; did you mean '{mended}'?"
     close = difflib.get_close_matches(key, candidates, n=1, cutoff=0.5)
     if not close:
         # try the last component against the last components
@@ -466,9 +524,11 @@ def _closest_field(name: str, fields: list[str]) -> list[str]:
 class _Where:
     """Finds the line of a dotted key in the TOML text, for messages."""
 
-    def __init__(self, text: str | None, path: Path | None):
+    def __init__(self, text: str | None, path: Path | None, origin: str = "file"):
         self.lines = text.splitlines() if text else []
         self.path = path
+        self.origin = origin  # "file", or the --set assignment being applied
+        self.given: dict[str, str] = {}  # keys set, -> origin
 
     def line_of(self, key: str) -> int | None:
         if not self.lines:
@@ -496,6 +556,11 @@ class _Where:
                 if found is None:
                     found = i
         return found
+
+    def is_header(self, key: str) -> bool:
+        """Whether ``key`` is written as a ``[table]`` (or ``[[table]]``) header in the file."""
+        line = self.line_of(key)
+        return line is not None and self.lines[line - 1].strip().startswith("[")
 
     def _element_line(self, table: str, index: int, rest: str | None) -> int | None:
         """The line of ``rest`` (a field, or None for the element itself) in the ``index``-th
@@ -529,6 +594,8 @@ class _Where:
         return None
 
     def error(self, key: str, msg: str) -> ConfigError:
+        if self.origin != "file":
+            return ConfigError(f"{msg} (from {self.origin} on the command line)", key=key)
         return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
 
 
@@ -589,6 +656,13 @@ def _convert(value: Any, t: Any, key: str, where: _Where) -> Any:
     return value
 
 
+def _leaves(value: dict, prefix: str) -> list[str]:
+    out = []
+    for k, v in value.items():
+        out.extend(_leaves(v, f"{prefix}.{k}") if isinstance(v, dict) and v else [f"{prefix}.{k}"])
+    return out
+
+
 def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) -> Any:
     fields = _fields(cls)
     hints = get_type_hints(cls)
@@ -604,12 +678,18 @@ def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) 
                                   + ", ".join(all_keys(cls)) + ")")
             known = all_keys(Config)
             sub = [k for k in known if k.startswith(prefix)] if prefix else known
-            raise where.error(key, "unknown key" + _suggest(key, sub or known))
+            leaves = _leaves(value, key) if isinstance(value, dict) else [key]
+            # a [table] header in the file, or a table of several keys: mend the table's name;
+            # a dotted key (--set lightning.enabled=true): mend the whole key
+            if len(leaves) != 1 or (isinstance(value, dict) and where.is_header(key)):
+                raise where.error(key, f"unknown table [{key}]" + _suggest(key, sub or known, table=True))
+            raise where.error(leaves[0], "unknown key" + _suggest(leaves[0], known))
         t = hints[attr]
         if dataclasses.is_dataclass(t) and isinstance(value, dict):
             setattr(obj, attr, _build(t, value, key + ".", where, base=getattr(obj, attr)))
         else:
             setattr(obj, attr, _convert(value, t, key, where))
+            where.given[key] = where.origin
     return obj
 
 
@@ -634,20 +714,19 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None,
             m = re.search(r"line (\d+)", str(e))
             raise ConfigError(f"not valid TOML: {e}", path=src,
                               line=int(m.group(1)) if m else None) from None
-    cfg = _build(Config, data or {}, "", _Where(text, src))
+    where = _Where(text, src)
+    cfg = _build(Config, data or {}, "", where)
+    cfg.given.update(where.given)
     if src is not None:
         cfg.base_dir = src.resolve().parent
         cfg.source = src.resolve()
+    for key in FILE_RELATIVE_KEYS:  # paths in a config are relative to it (input.path: see pipeline)
+        val = get_key(cfg, key)
+        if val and val.strip().lower() != "none" and not Path(val).expanduser().is_absolute():
+            _set_key(cfg, key, str(cfg.base_dir / Path(val).expanduser()))
     for ov in overrides or []:
         apply_override(cfg, ov)
-    if cfg.export.into:  # relative to the config file, like input.path
-        cfg.export.into = str(cfg.base_dir / cfg.export.into)
-    try:
-        validate(cfg)
-    except ConfigError as e:  # name the key's line in the file
-        if e.line is None and e.key is not None and text is not None:
-            raise ConfigError(e.message, path=src, line=_Where(text, src).line_of(e.key), key=e.key) from None
-        raise
+    validate(cfg)
     return cfg
 
 
@@ -666,16 +745,62 @@ def apply_override(cfg: Config, assignment: str) -> None:
     key = key.strip()
     m = re.match(r"^(?P<head>[\w.]+)\[(?P<n>\d+)\]\.(?P<rest>[\w.]+)$", key)
     if m:  # a field of one element of an array of tables: lighting.lights[0].angle=2
-        _override_element(cfg, m.group("head"), int(m.group("n")), m.group("rest"), parse_value(text.strip()))
+        where = _Where(None, None, origin=f"--set {key}={text.strip()}")
+        _override_element(cfg, m.group("head"), int(m.group("n")), m.group("rest"), parse_value(text.strip()),
+                          where)
+        cfg.given.update(where.given)
         return
     parts = key.split(".")
     nested: dict = {}
     cur = nested
     for p in parts[:-1]:
         cur = cur.setdefault(p, {})
-    cur[parts[-1]] = parse_value(text.strip())
-    where = _Where(None, None)
+    value = parse_value(text.strip())
+    if key in PATH_KEYS and isinstance(value, str) and value and value.strip().lower() != "none":
+        # a path typed on the command line is relative to the current folder
+        value = str((Path.cwd() / Path(value).expanduser()).absolute())
+    cur[parts[-1]] = value
+    where = _Where(None, None, origin=f"--set {key}={text.strip()}")
     _build(Config, nested, "", where, base=cfg)
+    cfg.given.update(where.given)
+
+
+# Keys that hold paths. From --set they resolve against the current folder; in a config file,
+# FILE_RELATIVE_KEYS against the config's folder (input.path too, in the pipeline; textures.texture
+# is relative to the model's folder, see TexturesConfig).
+PATH_KEYS = ("input.path", "export.into", "textures.texture", "textures.lightmap.cache_dir")
+FILE_RELATIVE_KEYS = ("export.into", "textures.lightmap.cache_dir")
+
+
+def _set_key(cfg: Config, key: str, value: Any) -> None:
+    obj: Any = cfg
+    parts = key.split(".")
+    for p in parts[:-1]:
+        obj = getattr(obj, _ALIASES.get(p, p))
+    setattr(obj, _ALIASES.get(parts[-1], parts[-1]), value)
+
+
+def origin(cfg: Config, key: str) -> str | None:
+    """Where ``key`` was set: "file", "--set KEY=VALUE", or None (its default)."""
+    return cfg.given.get(key)
+
+
+def error_at(cfg: Config, key: str, msg: str) -> ConfigError:
+    """A range error on ``key`` placed where the value came from: the config file and the key's
+    line in it, or the --set assignment on the command line (or just the key, for a default)."""
+    where = cfg.given.get(key)
+    if where is None and "[" in key:  # lighting.lights[0].color: the light's table
+        where = next((v for k, v in cfg.given.items() if k.startswith(key.split("]")[0] + "]")), None)
+    if where is not None and where != "file":
+        return ConfigError(f"{msg} (from {where} on the command line)", key=key)
+    if cfg.source is None:
+        return ConfigError(msg, key=key)
+    try:
+        text = cfg.source.read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = None
+    line = _Where(text, cfg.source).line_of(key) if where == "file" or where is None else None
+    return ConfigError(msg, path=cfg.source, line=line, key=key)
 
 
 def _element_class(obj: Any, attr: str, key: str) -> type:
@@ -687,7 +812,7 @@ def _element_class(obj: Any, attr: str, key: str) -> type:
     return args[0]
 
 
-def _override_element(cfg: Config, head: str, n: int, rest: str, value: Any) -> None:
+def _override_element(cfg: Config, head: str, n: int, rest: str, value: Any, where: "_Where | None" = None) -> None:
     """``--set lighting.lights[n].field=value``: set a field of element ``n``; ``n`` equal to
     the number of elements adds one with the defaults."""
     parts = head.split(".")
@@ -704,7 +829,7 @@ def _override_element(cfg: Config, head: str, n: int, rest: str, value: Any) -> 
     for p in rparts[:-1]:
         cur = cur.setdefault(p, {})
     cur[rparts[-1]] = value
-    _build(cls, nested, f"{head}[{n}].", _Where(None, None), base=elem)
+    _build(cls, nested, f"{head}[{n}].", where or _Where(None, None), base=elem)
     if n == len(items):
         items.append(elem)
 
@@ -749,7 +874,7 @@ def validate(cfg: Config) -> None:
     """Range checks that types alone cannot express."""
     def need(cond: bool, key: str, msg: str) -> None:
         if not cond:
-            raise ConfigError(msg, path=cfg.source, key=key)
+            raise error_at(cfg, key, msg)
 
     need(cfg.transform.scale > 0, "transform.scale", "must be > 0")
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
@@ -780,6 +905,9 @@ def validate(cfg: Config) -> None:
     need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
+    sb3_name = cfg.export.sb3_name
+    need(not sb3_name or (Path(sb3_name).name == sb3_name and sb3_name not in (".", "..")), "export.sb3_name",
+         "must be a file name, not a path")
     for i, lt in enumerate(cfg.lighting.lights):
         need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
         need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")
@@ -816,4 +944,4 @@ def numeric_keys() -> list[str]:
 
 
 __all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "key_defaults", "to_dict", "numeric_keys",
-           "parse_value", "Optional"]
+           "parse_value", "origin", "error_at", "PATH_KEYS", "Optional"]

@@ -42,7 +42,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -87,6 +87,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         raise ConfigError(f"--vary expects section.key=v1,v2,..., got {text!r}")
     key, vals = text.split("=", 1)
     key = key.strip()
+    config_mod.get_key(Config(), key)  # an unknown key is named as such, with a suggestion
     if key not in config_mod.numeric_keys():
         raise ConfigError("is not a numeric key (sweep varies ints and floats)", key=key)
     out: list[float] = []
@@ -265,7 +266,8 @@ def compare(run: dict, ref: dict) -> dict[str, Any]:
 
 
 def sweep(config: str | Path | Config, key: str, values: Sequence[float], reference: Any = None, *,
-          scene: Scene | None = None, out: str | Path | None = None, cache: Any = "auto") -> dict[str, Any]:
+          scene: Scene | None = None, out: str | Path | None = None,
+          progress: Callable[[str], None] | None = None, cache: Any = "auto") -> dict[str, Any]:
     """Bake once per value of ``key`` and compare each bake with a reference.
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
@@ -286,9 +288,15 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
 
         stage_cache = cache_mod.StageCache.for_config(base) if cache == "auto" else cache
         stage_cache = stage_cache or cache_mod.StageCache.in_memory()
+    say = progress or (lambda _msg: None)
     if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
+        say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries"
+            + (" and stores the stages before the key's)" if stage_cache is not None else ")"))
         _bake(_with_value(base, key, vals[0]), scene, key, stage_cache)
-    runs = {v: _bake(_with_value(base, key, v), scene, key, stage_cache) for v in vals}  # one bake per value
+    runs = {}
+    for i, v in enumerate(vals, 1):  # one bake per value
+        say(f"bake {i}/{len(vals)}: {key} = {v}")
+        runs[v] = _bake(_with_value(base, key, v), scene, key, stage_cache)
     ref_desc: dict[str, Any]
     ref_run: _Run | None = None
     if reference is None:
@@ -297,6 +305,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     elif isinstance(reference, Scene):
         ref_desc = {"kind": "scene"}
     else:
+        say(f"reference bake at {key} = {reference}")
         ref_run = _bake(_with_value(base, key, reference), scene, key, stage_cache)
         ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
                     "total_seconds": round(ref_run.total, 6)}
@@ -307,6 +316,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         from .export.preview import cameras
 
         cams = cameras(ref_mesh.verts, *PREVIEW_SIZE)
+    say("rendering previews and comparing with the reference")
     ref_images = _previews(ref_mesh, cams)
     rows = []
     for v in vals:
@@ -362,7 +372,8 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
 
 def summary_lines(table: dict) -> list[str]:
     """The sweep as a terminal table."""
-    lines = [f"sweep {table['key']} (reference: {table['reference']}); error = {table['error_metric']}",
+    lines = [f"sweep {table['key']}: reference = {reference_text(table['reference'])}",
+             f"  error = {table['error_metric']}",
              f"  {'value':>10} {'stage s':>9} {'total s':>9} {'error':>11} {'image err':>10} {'bytes':>10} "
              f"{'triangles':>10}"]
 
@@ -375,6 +386,18 @@ def summary_lines(table: dict) -> list[str]:
     if table.get("slope") is not None:
         lines.append(f"  log-log slope of the colour error against the value: {table['slope']:.2f}")
     return lines
+
+
+def reference_text(ref: dict) -> str:
+    """The reference of a sweep in words."""
+    kind = ref.get("kind")
+    if kind == "highest value":
+        return f"the bake at the highest value ({ref.get('value')})"
+    if kind == "reference run":
+        return f"an extra bake at {ref.get('value')} (not a row)"
+    if kind == "scene":
+        return "a lighting bake given by the caller"
+    return str(kind)
 
 
 def _slope(rows: list[dict]) -> float | None:

@@ -30,7 +30,7 @@ def test_unknown_key_names_file_line_and_suggestion(tmp_path):
 
 def test_unknown_section_suggests(tmp_path):
     p = write(tmp_path, "[lightning]\nenabled = true\n")
-    with pytest.raises(ConfigError, match="did you mean 'lighting"):
+    with pytest.raises(ConfigError, match=r"unknown table \[lightning\]; did you mean \[lighting\]\?"):
         config.load(p)
 
 

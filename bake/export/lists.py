@@ -37,10 +37,27 @@ from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
 from ..scratch.numbers import decimals_for, format_numbers, json_array, project_json_bytes, render_items
 
-def list_file_name(name: str) -> str:
-    """A safe file name for a list (Scratch ignores the file name on import)."""
+# An item with one of these is split by Scratch's import of a .txt file (scratch-gui
+# src/lib/import-csv.js: a .txt whose first, middle and last lines split into the same number of
+# fields at a comma or tab asks for a column and keeps only it). A .csv goes through a CSV parser
+# (papaparse) instead, which keeps a quoted field whole.
+_SPLIT_BY_IMPORT = re.compile(r'[,\t"\r\n]')
+
+
+def list_file_name(name: str, items: list[str] | None = None) -> str:
+    """A safe file name for a list (Scratch ignores the file name on import): ``lists/<name>.txt``,
+    or ``.csv`` when an item would be split by the .txt import (TextImage strings)."""
     safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "list"
-    return f"lists/{safe}.txt"
+    csv = items is not None and any(_SPLIT_BY_IMPORT.search(it) for it in items)
+    return f"lists/{safe}{'.csv' if csv else '.txt'}"
+
+
+def list_file_bytes(fname: str, items: list[str]) -> bytes:
+    """One item per line, no trailing newline (scratch.md 3); in a .csv every item is one quoted
+    field (RFC 4180: quotes doubled), so the import reads one column and unquotes it."""
+    if fname.endswith(".csv"):
+        return "\n".join('"' + it.replace('"', '""') + '"' for it in items).encode("utf-8")
+    return "\n".join(items).encode("utf-8")
 
 
 def _colour_list(rgba: np.ndarray, mode: str):
@@ -180,13 +197,14 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         items = render_items(lst)
         arr = json_array(items, "string" if lst.kind == "string" else "number")
         arrays[lst.name] = arr
-        fname = list_file_name(lst.name)
-        if fname in used_files:
-            raise ConfigError(f"lists '{used_files[fname]}' and '{lst.name}' map to the same file {fname}",
+        fname = list_file_name(lst.name, items)
+        stem = fname.rsplit(".", 1)[0]
+        if stem in used_files:
+            raise ConfigError(f"lists '{used_files[stem]}' and '{lst.name}' map to the same file {stem}.*",
                               key="export.names")
-        used_files[fname] = lst.name
+        used_files[stem] = lst.name
         if cfg.txt:
-            files[fname] = "\n".join(items).encode("utf-8")  # no trailing newline (scratch.md 3)
+            files[fname] = list_file_bytes(fname, items)
         info[lst.name] = {"items": len(items), "stride": lst.stride, "doc": lst.doc,
                           "project_json_bytes": project_json_bytes(lst.name, arr),
                           "file": fname if cfg.txt else None}

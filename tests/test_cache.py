@@ -619,3 +619,22 @@ def test_a_lighting_sweep_runs_the_stages_before_lighting_once(tmp_path, monkeyp
     assert calls == []
     table = json.loads((out / "sweeps" / "lighting.ao.samples.json").read_text())
     assert table["cache"]["where"] == ".bake-cache/stages"  # (in the output folder)
+
+
+def test_advice_that_reads_other_sections_follows_this_bakes_config(tmp_path):
+    """The import's warning about textures.enabled = false reads a later stage's section: a cached
+    import record gets it for the config of the bake that loads it, not the one that stored it."""
+    write_model(tmp_path / "m")
+    cfg = tmp_path / "m" / "b.toml"
+    cfg.write_text(CONFIG_B)
+    out = tmp_path / "out"
+
+    def import_warnings(rep):
+        return [w for w in rep["stages"][0]["warnings"] if "textures.enabled = false" in w]
+
+    off = bake(cfg, out, "textures.enabled=false")
+    assert len(import_warnings(off)) == 1
+    on = bake(cfg, out)  # the import comes from the cache
+    assert "import" in on["cache"]["from_cache"] and import_warnings(on) == []
+    again = bake(cfg, out, "textures.enabled=false")
+    assert again["cache"]["from_cache"] == _stages(again) and len(import_warnings(again)) == 1

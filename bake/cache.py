@@ -446,8 +446,9 @@ _MODE = 0o666 & ~_umask()  # files get the usual mode, not mkstemp's 0o600
 class DiskStore:
     """Entries and manifests as files in one folder, least recently used dropped past ``max_bytes``.
 
-    ``lazy``: a folder (the bake's output folder) that, while it does not exist, must not be
-    created by a bake that fails: writes wait in memory until :meth:`flush` (the bake succeeded)."""
+    ``lazy``: a folder (the output folder's cache) that, while it does not exist, must not be
+    created by a bake that fails: writes wait in memory (readable) until :meth:`flush`, which
+    ``output.finish`` calls once the outputs are written."""
 
     def __init__(self, root: Path, max_bytes: int, lazy: Path | None = None, label: str | None = None):
         self.root = Path(root)
@@ -463,6 +464,9 @@ class DiskStore:
         return self.root / name
 
     def read(self, name: str) -> np.ndarray | None:
+        for n, chunks in reversed(self.pending or []):
+            if n == name:
+                return np.frombuffer(bytearray(b"".join(chunks)), np.uint8)
         p = self._path(name)
         try:
             with open(p, "rb") as f:
@@ -606,8 +610,8 @@ class StageCache:
             if not root.is_absolute():
                 root = Path(cfg.base_dir) / root
         elif c.out_dir is not None:  # a failed first bake into a new folder must not create it
-            return cls(DiskStore(Path(c.out_dir) / SUBDIR, int(c.max_mb * 1024 * 1024), lazy=Path(c.out_dir),
-                                 label=SUBDIR.as_posix()))  # (the report names it within the folder)
+            return cls(DiskStore(Path(c.out_dir) / SUBDIR, int(c.max_mb * 1024 * 1024),
+                                 lazy=Path(c.out_dir) / SUBDIR, label=SUBDIR.as_posix()))  # (the report names it within the folder)
         else:
             return None
         return cls(DiskStore(root, int(c.max_mb * 1024 * 1024)))
@@ -734,9 +738,14 @@ class Session:
         return None
 
     # ------------------------------------------------------------ store
+    def deferred(self) -> bool:
+        return bool(getattr(self.store, "pending", None))
+
     def deps_of(self, scene: Any, covered: frozenset[str]) -> list[str]:
-        """Files the scene says were read (and material textures) not already in the chain."""
+        """Files the scene says were read or looked for and not found (and material textures) not
+        already in the chain: a missing file's digest is "missing" until it appears."""
         paths = {os.path.abspath(p) for p in getattr(scene.source, "files_read", ())}
+        paths |= {os.path.abspath(p) for p in getattr(scene.source, "files_missing", ())}
         paths |= {os.path.abspath(m.texture) for m in scene.materials if getattr(m, "texture", None)}
         return sorted(paths - covered)
 

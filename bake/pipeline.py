@@ -103,6 +103,15 @@ class BakeResult:
     # the stage cache's part in this bake (None without a cache): where it is, which stages came
     # from it, which were stored, its warnings
     cache: dict[str, Any] | None = None
+    # entries waiting for the outputs to be written (a first bake into a new folder): finish_cache
+    cache_session: Any = None
+
+
+def finish_cache(result: BakeResult) -> None:
+    """Write the stage cache entries a bake kept back until its outputs were written."""
+    if result.cache_session is not None:
+        result.cache_session.finish()
+        result.cache_session = None
 
 
 Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done" | "cached")
@@ -209,11 +218,15 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             observe(spec.name, scene)
         if progress:
             progress(spec.name, "done")
+    later = None
     if session is not None:
-        info["dropped"] = len(session.finish())
+        if session.deferred():  # a new output folder: written once the outputs are (output.finish)
+            later = session
+        else:
+            info["dropped"] = len(session.finish())
         info["stored"] = list(session.stored)
     return BakeResult(scene=scene, records=records, skipped=skipped,
-                      seconds=time.perf_counter() - t0, config=cfg, cache=info)
+                      seconds=time.perf_counter() - t0, config=cfg, cache=info, cache_session=later)
 
 
 def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:

@@ -297,6 +297,8 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     for i, v in enumerate(vals, 1):  # one bake per value
         say(f"bake {i}/{len(vals)}: {key} = {v}")
         runs[v] = _bake(_with_value(base, key, v), scene, key, stage_cache)
+    if stage_cache is not None:  # what a new folder's cache kept back: the sweep's bakes succeeded
+        stage_cache.store.flush()
     ref_desc: dict[str, Any]
     ref_run: _Run | None = None
     if reference is None:

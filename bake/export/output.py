@@ -111,6 +111,9 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
         outs.commit()
     if live_report and cfg.report.html:
         html.write_live_stamp(out_dir, stamp)
+    from ..pipeline import finish_cache
+
+    finish_cache(result)  # a new folder's stage cache: only now that the outputs are written
     return rep
 
 

@@ -277,8 +277,10 @@ def test_report_html_reloads_itself_in_a_browser_when_the_watch_writes_a_new_one
         assert info2["live_stamp"] != info["live_stamp"]
         state = wait_for(lambda v: v.startswith("complete") and v.endswith(info2["live_stamp"]), "reloaded page")
         assert state.split()[1] != origin  # a new document, not the old one patched
-        time.sleep(0.5)
-        assert evaluate("window.scrollY") == 300  # the reload keeps the place on the page
+        end = time.monotonic() + 20  # the reload keeps the place on the page (restored after the load)
+        while evaluate("window.scrollY") != 300 and time.monotonic() < end:
+            time.sleep(0.2)
+        assert evaluate("window.scrollY") == 300
     finally:
         cdp.close()
 

@@ -376,6 +376,18 @@ class ReportConfig:
 
 
 @dataclass
+class CacheConfig:
+    """The stage cache (bake/cache.py): each stage's output, keyed by everything it depends on."""
+
+    # "" = <output folder>/.bake-cache/stages; a path (relative to this config file) = one cache
+    # shared between bakes; "none" = no cache.
+    dir: str = ""
+    max_mb: float = 1024.0  # size cap in MiB: past it the least recently used entries are deleted
+    # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
+    out_dir: Path | None = field(default=None, metadata={"internal": True})
+
+
+@dataclass
 class Config:
     input: InputConfig = field(default_factory=InputConfig)
     import_: ImportConfig = field(default_factory=ImportConfig)
@@ -387,6 +399,7 @@ class Config:
     textures: TexturesConfig = field(default_factory=TexturesConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
+    cache: CacheConfig = field(default_factory=CacheConfig)
     # Where the config came from (not a TOML key): paths in it are relative to this folder.
     base_dir: Path = field(default_factory=Path.cwd, metadata={"internal": True})
     source: Path | None = field(default=None, metadata={"internal": True})
@@ -902,6 +915,7 @@ def validate(cfg: Config) -> None:
          "raise one of them")
     need(cfg.bsp.split_weight >= 0 and cfg.bsp.balance_weight >= 0, "bsp.split_weight",
          "weights must be >= 0")
+    need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
     sb3_name = cfg.export.sb3_name

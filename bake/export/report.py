@@ -14,6 +14,9 @@
   bake whose colours are all black); each is also among its stage's warnings
 * ``outputs``: relative path -> "written" | "unchanged" | "removed"
 * ``seconds``: wall time of the whole bake
+* ``cache``: the stage cache's part (``where``, ``from_cache``: the stages loaded rather than run,
+  ``stored``, ``warnings``), null without a cache; a stage from the cache has
+  ``details.cache = {from_cache: true, computed_seconds}`` and ``seconds`` this bake spent on it
 """
 
 from __future__ import annotations
@@ -66,7 +69,10 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
                        "ok": size < ASSET_LIMIT, "note": "each asset must be under 10 MB"})
     effects: list[dict[str, Any]] = []
     for rec in result.records:
-        effects.append({"name": rec.name, "ran": True, "reason": "stage ran", "seconds": round(rec.seconds, 6)})
+        cached = (rec.details.get("cache") or {}).get("from_cache")
+        effects.append({"name": rec.name, "ran": True, "seconds": round(rec.seconds, 6),
+                        "reason": f"from the stage cache (computed in {rec.details['cache']['computed_seconds']:.3f} s)"
+                        if cached else "stage ran"})
         for e in rec.effects:
             effects.append({**e, "name": f"{rec.name}.{e.get('name', '?')}"})
     effects.extend(result.skipped)
@@ -90,7 +96,22 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "outputs": dict(sorted((outputs or {}).items())),
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
+        "cache": _cache_json(getattr(result, "cache", None)),
     }
+
+
+def _cache_json(info: dict[str, Any] | None) -> dict[str, Any] | None:
+    if info is None:
+        return None
+    return {"where": info.get("where"), "from_cache": list(info.get("from_cache", [])),
+            "stored": list(info.get("stored", [])), "warnings": list(info.get("warnings", [])),
+            "load_seconds": round(float(info.get("load_seconds", 0.0)), 6)}
+
+
+def cache_note(stage: dict[str, Any]) -> str:
+    """"from the cache (computed in 6.41 s)" for a stage the bake loaded, else ""."""
+    c = (stage.get("details") or {}).get("cache") or {}
+    return f"from the cache (computed in {c.get('computed_seconds', 0):.2f} s)" if c.get("from_cache") else ""
 
 
 def to_json(report: dict[str, Any]) -> bytes:
@@ -140,7 +161,9 @@ def to_markdown(report: dict[str, Any]) -> str:
         cin, cout = _counts(st["counts_in"]), _counts(st["counts_out"])
         acc = ", ".join(f"{k} {fmt_accuracy(k, v)}" for k, v in st["accuracy"].items())
         warn = "<br>".join(w.replace("|", "\\|") for w in st["warnings"])
-        out.append(f"| {st['name']} | {st['seconds']:.3f} | {cin} | {cout} | {acc} | {warn} |")
+        note = cache_note(st)
+        out.append(f"| {st['name']}{' (' + note + ')' if note else ''} | {st['seconds']:.3f} | {cin} | {cout} | "
+                   f"{acc} | {warn} |")
     out += ["", "## Effects", "", "| effect | ran | reason |", "|---|---|---|"]
     for e in report["effects"]:
         extra = f" ({e['rays']} rays)" if e.get("rays") else ""
@@ -203,7 +226,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         acc = " ".join(f"{k}={100 * v:.3g}%" if k.startswith("hausdorff") else f"{k}={v:.3g}" for k, v in nums.items())
         if any(k.startswith("hausdorff") for k in nums):
             acc += " (Hausdorff distances in % of the bounding-box diagonal)"
-        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip())
+        note = cache_note(st)
+        lines.append((f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip() + (f"  [{note}]" if note else "")))
         problems = set(st.get("problems", []))
         for w in st["warnings"]:
             lines.append(f"    {'PROBLEM' if w in problems else 'warning'}: {w}")

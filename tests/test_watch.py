@@ -185,15 +185,25 @@ class CDP:
             os.dup2(r_in, 3)
             os.dup2(w_out, 4)
 
-        self.p = subprocess.Popen([exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                                   "--remote-debugging-pipe", f"--user-data-dir={profile}", url],
-                                  preexec_fn=fds, pass_fds=(3, 4), stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL)
+        # the player suite's flags (vm/player.js): nothing reaches for the network at start-up
+        self.log = profile.parent / "chromium.log"
+        with open(self.log, "wb") as log:
+            self.p = subprocess.Popen([exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                                       "--disable-background-networking", "--disable-component-update",
+                                       "--disable-sync", "--host-resolver-rules=MAP * ~NOTFOUND",
+                                       "--remote-debugging-pipe", f"--user-data-dir={profile}", url],
+                                      preexec_fn=fds, pass_fds=(3, 4), stdout=log, stderr=log)
         os.close(r_in)
         os.close(w_out)
         self.w, self.r = w_in, r_out
         self.buf = b""
         self.n = 0
+        # a cold first start (a fresh machine, a just-installed browser) took over 20 s once in CI
+        try:
+            self.call("Target.getTargets", timeout=120)
+        except BaseException:
+            self.close()
+            raise
 
     def call(self, method: str, params: dict | None = None, session: str | None = None, timeout: float = 20):
         self.n += 1
@@ -216,7 +226,9 @@ class CDP:
                 if not chunk:
                     raise RuntimeError("chromium closed the pipe")
                 self.buf += chunk
-        raise TimeoutError(method)
+        tail = self.log.read_bytes()[-2000:].decode("utf-8", "replace")
+        state = "running" if self.p.poll() is None else f"exited with {self.p.returncode}"
+        raise TimeoutError(f"{method}: no answer in {timeout} s (chromium {state}); its log ends:\n{tail}")
 
     def close(self):
         try:

@@ -24,6 +24,13 @@ API::
 
 ``scene=`` bakes a given :class:`~bake.scene.Scene` with the lighting stage alone (no import,
 no export: lighting keys only), for tests and for sweeping before a model is on disk.
+
+Stage reuse: the stages before the key's stage do not change from row to row, so every bake after
+the first loads them from the stage cache (bake/cache.py): the bake's folder cache when it has one
+(``bake sweep`` uses ``OUT/.bake-cache/stages``, so a sweep after ``bake run`` does not even
+compute them once), else one in memory for the sweep. The key's stage and every stage after it
+always run (their seconds are the point of the sweep) and are not stored. ``cache=None`` bakes
+every row from scratch.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -55,7 +62,9 @@ STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
 ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
                   "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
                   "bsp": ("inflation", "triangles added by splits (fraction of the input)"),
-                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)")}
+                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)"),
+                  "export": ("position_error", "largest position rounding error, fraction of the diagonal "
+                                               "(a bound: half the rounding step)")}
 IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1)")
 PREVIEW_SIZE = (160, 120)
 
@@ -80,6 +89,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         raise ConfigError(f"--vary expects section.key=v1,v2,..., got {text!r}")
     key, vals = text.split("=", 1)
     key = key.strip()
+    config_mod.get_key(Config(), key)  # an unknown key is named as such, with a suggestion
     if key not in config_mod.numeric_keys():
         raise ConfigError("is not a numeric key (sweep varies ints and floats)", key=key)
     out: list[float] = []
@@ -127,10 +137,12 @@ class _Run:
     lists: dict | None = None  # what the export wrote (lists.json), None without export
     report: dict | None = None  # report.json's shape (config, materials) for the previews
     final: Scene | None = None  # the scene after the last stage (else ``scene``)
+    cached: list[str] | None = None  # stages loaded from the stage cache
 
 
-def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
-    """One bake: the lighting stage alone on ``scene``, or the whole pipeline."""
+def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -> _Run:
+    """One bake: the lighting stage alone on ``scene``, or the whole pipeline (the stages before
+    the key's from ``stage_cache`` when it has them)."""
     t0 = time.perf_counter()
     if scene is not None:
         from .lighting.stage import stage
@@ -144,7 +156,8 @@ def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
     from .pipeline import run
 
     seen: dict[str, Scene] = {}
-    res = run(cfg, observe=lambda name, sc: seen.__setitem__(name, sc) if name == "lighting" else None)
+    res = run(cfg, observe=lambda name, sc: seen.__setitem__(name, sc) if name == "lighting" else None,
+              cache=stage_cache, recompute=stages_for(key))
     total = time.perf_counter() - t0
     recs = {r.name: r.to_json() for r in res.records}
     stages = stages_for(key)
@@ -160,7 +173,8 @@ def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
         lists = json.loads(outputs[cfg.export.json_name]).get("lists", {})
     # the lighting stage's scene: its colours line up with the lighting artefact (a BSP splits later)
     return _Run(seen.get("lighting", res.scene), recs, sum(recs[n]["seconds"] for n in ran) if ran else total,
-                total, lists, report_mod.build(res), final=res.scene)
+                total, lists, report_mod.build(res), final=res.scene,
+                cached=list((res.cache or {}).get("from_cache", [])))
 
 
 def _mesh(run: _Run):
@@ -254,12 +268,15 @@ def compare(run: dict, ref: dict) -> dict[str, Any]:
 
 
 def sweep(config: str | Path | Config, key: str, values: Sequence[float], reference: Any = None, *,
-          scene: Scene | None = None, out: str | Path | None = None) -> dict[str, Any]:
+          scene: Scene | None = None, out: str | Path | None = None,
+          progress: Callable[[str], None] | None = None, cache: Any = "auto") -> dict[str, Any]:
     """Bake once per value of ``key`` and compare each bake with a reference.
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
     value (not a row); a :class:`Scene` = a lighting bake made elsewhere. ``out`` (a path without
-    suffix) writes ``out.json`` and ``out.png``. Returns the table (JSON-serialisable)."""
+    suffix) writes ``out.json`` and ``out.png``. ``cache``: ``"auto"`` = the config's stage cache
+    (``StageCache.for_config``) or one in memory, a ``StageCache``, or None (no reuse). Returns the
+    table (JSON-serialisable)."""
     base = _load(config)
     config_mod.get_key(base, key)  # unknown key -> ConfigError
     if not stages_for(key):
@@ -267,9 +284,23 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     vals = sorted(dict.fromkeys(values), key=float)
     if not vals:
         raise ConfigError("sweep needs at least one value", key=key)
+    stage_cache = None
+    if scene is None and cache is not None:
+        from . import cache as cache_mod
+
+        stage_cache = cache_mod.StageCache.for_config(base) if cache == "auto" else cache
+        stage_cache = stage_cache or cache_mod.StageCache.in_memory()
+    say = progress or (lambda _msg: None)
     if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
-        _bake(_with_value(base, key, vals[0]), scene, key)
-    runs = {v: _bake(_with_value(base, key, v), scene, key) for v in vals}  # one bake per value
+        say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries"
+            + (" and stores the stages before the key's)" if stage_cache is not None else ")"))
+        _bake(_with_value(base, key, vals[0]), scene, key, stage_cache)
+    runs = {}
+    for i, v in enumerate(vals, 1):  # one bake per value
+        say(f"bake {i}/{len(vals)}: {key} = {v}")
+        runs[v] = _bake(_with_value(base, key, v), scene, key, stage_cache)
+    if stage_cache is not None:  # what a new folder's cache kept back: the sweep's bakes succeeded
+        stage_cache.store.flush()
     ref_desc: dict[str, Any]
     ref_run: _Run | None = None
     if reference is None:
@@ -278,7 +309,8 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     elif isinstance(reference, Scene):
         ref_desc = {"kind": "scene"}
     else:
-        ref_run = _bake(_with_value(base, key, reference), scene, key)
+        say(f"reference bake at {key} = {reference}")
+        ref_run = _bake(_with_value(base, key, reference), scene, key, stage_cache)
         ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
                     "total_seconds": round(ref_run.total, 6)}
     ref_colors = _colors(reference if isinstance(reference, Scene) else ref_run.scene)
@@ -288,6 +320,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         from .export.preview import cameras
 
         cams = cameras(ref_mesh.verts, *PREVIEW_SIZE)
+    say("rendering previews and comparing with the reference")
     ref_images = _previews(ref_mesh, cams)
     rows = []
     for v in vals:
@@ -303,6 +336,10 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     err_key, err_label = error_of(key)
     table = {"key": key, "values": list(vals), "stages": list(stages_for(key)), "reference": ref_desc,
              "rows": rows, "error_metric": err_label, "error_key": err_key, "slope": _slope(rows),
+             "cache": None if stage_cache is None else {
+                 "where": stage_cache.store.describe(),
+                 "note": "the stages before the key's are baked once and loaded from the stage cache after that "
+                         "(cached_stages per row); total_seconds counts loading them, not computing them"},
              "metric": "error: " + err_label + "; image_rmse: depth-buffer previews of the written lists "
                        f"({PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, 3 views) against the reference's; rmse / max "
                        "error of shown colours (0..1, RGB) over traced vertices (or triangles); irradiance is linear"}
@@ -333,12 +370,14 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
         "rays": int(sum(e.get("rays", 0) or 0 for e in effects)),
         "reported_error": {e["name"]: e["error"] for e in effects if "error" in e},
         "effect_seconds": {e["name"]: e.get("seconds") for e in effects},
+        "cached_stages": list(run.cached or []),
     }
 
 
 def summary_lines(table: dict) -> list[str]:
     """The sweep as a terminal table."""
-    lines = [f"sweep {table['key']} (reference: {table['reference']}); error = {table['error_metric']}",
+    lines = [f"sweep {table['key']}: reference = {reference_text(table['reference'])}",
+             f"  error = {table['error_metric']}",
              f"  {'value':>10} {'stage s':>9} {'total s':>9} {'error':>11} {'image err':>10} {'bytes':>10} "
              f"{'triangles':>10}"]
 
@@ -351,6 +390,18 @@ def summary_lines(table: dict) -> list[str]:
     if table.get("slope") is not None:
         lines.append(f"  log-log slope of the colour error against the value: {table['slope']:.2f}")
     return lines
+
+
+def reference_text(ref: dict) -> str:
+    """The reference of a sweep in words."""
+    kind = ref.get("kind")
+    if kind == "highest value":
+        return f"the bake at the highest value ({ref.get('value')})"
+    if kind == "reference run":
+        return f"an extra bake at {ref.get('value')} (not a row)"
+    if kind == "scene":
+        return "a lighting bake given by the caller"
+    return str(kind)
 
 
 def _slope(rows: list[dict]) -> float | None:
@@ -394,10 +445,24 @@ def _component(effect: str) -> str:
     return "direct" if effect.startswith("light[") else _COMPONENT_OF.get(effect, effect)
 
 
+def pareto_front(seconds: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Indices of the bakes no other bake beats on both time and error (the fastest bake for
+    each error reached), in order of seconds. Stage times are noisy, so joining the points in
+    the order of the swept value zig-zags back and forth along the seconds axis; the front is
+    the trade-off a reader looks for, and it runs left to right."""
+    seconds = np.asarray(seconds, float)
+    error = np.asarray(error, float)
+    order = np.lexsort((error, seconds))  # by seconds, then error
+    e = error[order]
+    best_before = np.minimum.accumulate(np.concatenate([[np.inf], e[:-1]]))
+    return order[e < best_before].astype(np.int64)
+
+
 def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
     """Three panels: the key's error against seconds, list bytes against seconds (each point
-    labelled with its value), and the errors against the value (for lighting keys each effect's
-    actual error next to the stage's own estimate, in the same units)."""
+    labelled with its value; against seconds only the Pareto front of error and seconds is
+    joined, in order of seconds), and the errors against the value (for lighting keys each
+    effect's actual error next to the stage's own estimate, in the same units)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -414,25 +479,34 @@ def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
         return np.isfinite(y) & (y > 0) & np.isfinite(xs), y
 
     def labelled(ax, xs, ys, ok, style, label):
-        ax.plot(xs[ok], ys[ok], style, label=label)
+        """Points labelled with their values; no line (against seconds the value order is not
+        the order along the axis)."""
+        line = ax.plot(xs[ok], ys[ok], style, linestyle="none", label=label)[0]
         for xi, yi, r in zip(xs[ok], ys[ok], [r for r, k in zip(rows, ok) if k]):
             ax.annotate(f"{r['value']:g}" if isinstance(r["value"], (int, float)) else str(r["value"]), (xi, yi),
                         textcoords="offset points", xytext=(4, 4), fontsize=7)
+        return line
+
+    def front(ax, xs, ys, ok, line):
+        f = pareto_front(xs[ok], ys[ok])
+        if len(f) > 1:
+            ax.plot(xs[ok][f], ys[ok][f], "-", color=line.get_color(), alpha=0.6,
+                    label=f"{line.get_label()}: fastest for its error")
 
     ok, y = series([r.get("error") for r in rows], secs)
     if ok.any():
-        labelled(ax1, secs, y, ok, "o-", table.get("error_key", "error"))
+        front(ax1, secs, y, ok, labelled(ax1, secs, y, ok, "o", table.get("error_key", "error")))
         if (y[ok] > 0).all() and y[ok].max() > 20 * y[ok].min():
             ax1.set_yscale("log")
     ok2, y2 = series([r.get("image_rmse") for r in rows], secs)
     if ok2.any() and table.get("error_key") != "image_rmse":
-        labelled(ax1, secs, y2, ok2, "s--", "image_rmse")
+        front(ax1, secs, y2, ok2, labelled(ax1, secs, y2, ok2, "s", "image_rmse"))
     ax1.set_xlabel(f"seconds ({'+'.join(table.get('stages') or ['stage'])})")
     ax1.set_ylabel("error")
     ax1.set_title(f"{table.get('error_metric', 'error')}", fontsize=9)
     ok, y = series([r.get("bytes") for r in rows], secs)
     if ok.any():
-        labelled(ax2, secs, y, ok, "o-", "list bytes in project.json")
+        labelled(ax2, secs, y, ok, "o", "list bytes in project.json")
     ax2.set_xlabel("seconds")
     ax2.set_ylabel("bytes")
     ax2.set_title("what it costs in project.json", fontsize=9)

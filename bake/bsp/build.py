@@ -31,7 +31,7 @@ import numpy as np
 
 from scipy.spatial import ConvexHull
 
-from .split import FaceStore, split_faces
+from .split import FaceStore, classify, distances, split_faces
 
 
 @dataclass
@@ -53,6 +53,14 @@ class BuildOptions:
     # along a diagonal) or "pieces" (1 per fragment cut, the classic count)
     hull_peel: bool = True  # peel the convex-hull faces of sets larger than leaf_max
     peeled_candidates: bool = True  # planes of peeled fragments are candidates for the core
+    lookahead: int = 0
+    root_plane: object = None
+    capture: object = None
+    sweep: bool = False
+    sweep_dirs: int = 0
+    free_planes: int = 0
+    free_min: int = 0
+    core_weight: float = 1.0
     fragments: str = "polygons"  # "fans": triangulate every cut piece at once (for comparison)
 
 
@@ -106,8 +114,18 @@ def hide_graph(store: FaceStore, table: np.ndarray, eps: float) -> np.ndarray:
     ids = np.where(valid, table, 0)
     cnt = store.count[ids]
     K = int(cnt.max())
-    P = store.pos[ids, :K].astype(np.float32)  # (B, m, K, 3)
-    pl = store.planes_of(ids).astype(np.float32)  # (B, m, 4)
+    P = store.pos[ids, :K]  # (B, m, K, 3)
+    pl = store.planes_of(ids)  # (B, m, 4)
+    live = valid & ~store.degenerate_of(ids)
+    return hide_raw(P, pl, store.two_sided_of(ids) & valid, live, eps)
+
+
+def hide_raw(P, pl, ts, live, eps):
+    """:func:`hide_graph` on raw padded polygons ``P (B, m, K, 3)`` with planes ``pl (B, m, 4)``,
+    two-sided flags and which slots are live (valid and not degenerate)."""
+    B, m, K = P.shape[:3]
+    P = P.astype(np.float32)
+    pl = pl.astype(np.float32)
     e = np.float32(eps)
     beh = inf = None  # [b, i, j]: part of j behind / in front of plane i
     for k in range(K):
@@ -118,12 +136,10 @@ def hide_graph(store: FaceStore, table: np.ndarray, eps: float) -> np.ndarray:
             beh |= Dk < -e
             inf |= Dk > e
     M = beh & inf.transpose(0, 2, 1)
-    ts = store.two_sided_of(ids) & valid
     if ts.any():
         M |= ts[:, :, None] & inf & inf.transpose(0, 2, 1)
         M |= ts[:, None, :] & beh & beh.transpose(0, 2, 1)
         M |= (ts[:, :, None] & ts[:, None, :]) & inf & beh.transpose(0, 2, 1)
-    live = valid & ~store.degenerate_of(ids)
     M &= live[:, :, None] & live[:, None, :]
     M &= ~np.eye(m, dtype=bool)[None]
     return M
@@ -240,6 +256,35 @@ def hull_peel(store: FaceStore, ids: np.ndarray, eps: float, hull_above: int = 5
         status[j[d.max(1) <= eps]] = 2
         status[j[d.min(1) >= -eps]] = 1
     return status
+
+
+def clip_pieces(P, cnt, d):
+    """Front and back pieces of padded convex polygons cut by their snapped distances ``d``
+    (no store, no attributes): ((front P, count), (back P, count))."""
+    m, K = P.shape[:2]
+    k = np.arange(K)[None, :]
+    valid = k < cnt[:, None]
+    nxt = (k + 1) % cnt[:, None]
+    d1 = np.take_along_axis(d, nxt, axis=1)
+    cross = valid & (d * d1 < 0)
+    pos_first = d > 0
+    ia = np.where(pos_first, k, nxt)
+    ib = np.where(pos_first, nxt, k)
+    da = np.take_along_axis(d, ia, axis=1)
+    db = np.take_along_axis(d, ib, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(cross, da / (da - db), 0.0)[..., None]
+    Pa, Pb = np.take_along_axis(P, ia[..., None], 1), np.take_along_axis(P, ib[..., None], 1)
+    cand = np.stack([P, Pa + t * (Pb - Pa)], axis=2).reshape(m, 2 * K, 3)
+    out = []
+    for keep in (np.stack([valid & (d >= 0), cross], 2).reshape(m, 2 * K),
+                 np.stack([valid & (d <= 0), cross], 2).reshape(m, 2 * K)):
+        c = keep.sum(1)
+        kmax = max(3, int(c.max())) if m else 3
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :kmax]
+        order = np.where(np.arange(kmax)[None] < c[:, None], order, order[:, :1])
+        out.append((np.take_along_axis(cand, order[..., None], 1), c))
+    return out
 
 
 # ---------------------------------------------------------------------------- the builder
@@ -383,9 +428,16 @@ class _Builder:
         best_kind = np.zeros(A, np.int8)
         cen_all = (P * (np.arange(Kl)[None, :] < cnt[:, None])[..., None]).sum(1) / cnt[:, None]
 
+        allsc, allpl, allw, allk = [], [], [], []
+
         def consider(planes, world, valid, kind):
             """planes/world (R, A, 4), valid (R, A)"""
             sc = self.score_planes(Pc, deg, cnt, owner, starts, planes, valid, A)
+            if opt.lookahead:
+                allsc.append(sc)
+                allpl.append(planes)
+                allw.append(world)
+                allk.append(np.full(sc.shape, kind, np.int8))
             for r in range(len(sc)):
                 better = sc[r] < best
                 best[better] = sc[r][better]
@@ -403,6 +455,35 @@ class _Builder:
             nrm = st.planes_of(fr)[:, :3]
             planes, world = self.quantise(nrm, st.src_center[st.src[fr]])
             consider(planes.reshape(*cc.shape, 4), world.reshape(*cc.shape, 4), valid, 0)
+            if opt.sweep:
+                nr = nrm.reshape(*cc.shape, 3)
+                for r in range(len(nr)):
+                    t, ok = self.sweep(P, owner, starts, nr[r])
+                    planes, world = self.quantise(nr[r], t[:, None] * nr[r])
+                    consider(planes[None], world[None], (ok & valid[r])[None], 4)
+        for r in range(opt.sweep_dirs):
+            n = rng.normal(size=(A, 3))
+            n /= np.linalg.norm(n, axis=1)[:, None]
+            t, ok = self.sweep(P, owner, starts, n)
+            planes, world = self.quantise(n, t[:, None] * n)
+            consider(planes[None], world[None], ok[None], 5)
+        if opt.free_planes:
+            # planes through three random corners of the node's fragments
+            F = opt.free_planes
+            for r0 in range(F):
+                pick = []
+                for t in range(3):
+                    u = rng.random(A)
+                    j = starts[:-1] + np.minimum((u * sizes).astype(np.int64), sizes - 1)
+                    kk = (rng.random(A) * cnt[j]).astype(np.int64)
+                    pick.append(P[j, kk])
+                n = np.cross(pick[1] - pick[0], pick[2] - pick[0])
+                ln = np.linalg.norm(n, axis=1)
+                ok = ln > 1e-9
+                n = n / np.maximum(ln, 1e-300)[:, None]
+                ok &= sizes >= opt.free_min
+                planes, world = self.quantise(n, pick[0])
+                consider(planes[None], world[None], ok[None], 3)
         if opt.gap_planes or opt.axis_planes:
             lo = P.min(1)
             hi = P.max(1)
@@ -425,10 +506,89 @@ class _Builder:
                     p3[:, ax] = med
                     planes, world = self.quantise(n, p3)
                     consider(planes[None], world[None], (sizes > 1)[None], 2)
+        if opt.lookahead and allsc:
+            self.look(fids, starts, np.concatenate(allsc), np.concatenate(allpl), np.concatenate(allw),
+                      np.concatenate(allk), best, best_plane, best_world, best_kind)
         # a node whose every candidate failed (all fragments degenerate): no plane
         for k, name in ((0, "face_planes"), (1, "gap_planes"), (2, "axis_planes")):
             self.stats[name] += int(((best_kind == k) & np.isfinite(best)).sum())
         return best_plane, best_world, np.isfinite(best)
+
+    def look(self, fids, starts, sc, pl, wo, kind, best, best_plane, best_world, best_kind):
+        """One step of lookahead on small nodes: re-score the ``lookahead`` best candidates by
+        what the children leave unpeeled (their cyclic cores must be split again)."""
+        st, opt = self.store, self.opt
+        eps = opt.epsilon
+        k = opt.lookahead
+        sizes = starts[1:] - starts[:-1]
+        for a in np.flatnonzero((sizes <= opt.leaf_max) & np.isfinite(best)):
+            ids = fids[starts[a]:starts[a + 1]]
+            M = hide_graph(st, ids[None], eps)
+            top = np.argsort(sc[:, a], kind="stable")[:k]
+            top = top[np.isfinite(sc[top, a])]
+            bsc = np.inf
+            for r in top:
+                plane = pl[r, a]
+                d = distances(st.pos[ids], np.repeat(plane[None], len(ids), 0), eps)
+                lab = classify(d, st.degenerate_of(ids), st.count[ids])
+                core = 0
+                X = lab == 3
+                (fP, fc), (bP, bc) = clip_pieces(st.pos[ids[X]], st.count[ids[X]], d[X])
+                for side, pP in ((0, fP), (1, bP)):
+                    keep = lab == side
+                    K2 = max(st.K, pP.shape[1])
+                    Pw = st.pos[ids[keep]]
+                    if K2 > Pw.shape[1]:
+                        Pw = np.concatenate([Pw, np.repeat(Pw[:, :1], K2 - Pw.shape[1], 1)], 1)
+                    if K2 > pP.shape[1]:
+                        pP = np.concatenate([pP, np.repeat(pP[:, :1], K2 - pP.shape[1], 1)], 1)
+                    Pc = np.concatenate([Pw, pP])
+                    ii = np.concatenate([ids[keep], ids[X]])
+                    if len(ii) == 0:
+                        continue
+                    live = ~st.degenerate_of(ii)
+                    Mc = hide_raw(Pc[None], st.planes_of(ii)[None], st.two_sided_of(ii)[None], live[None], eps)
+                    stt, _ = peel(Mc, np.ones((1, len(ii)), bool))
+                    core += int((stt == 0).sum())
+                total = sc[r, a] + opt.core_weight * core
+                if total < bsc:
+                    bsc = total
+                    best_plane[a] = plane
+                    best_world[a] = wo[r, a]
+                    best_kind[a] = kind[r, a]
+
+    def sweep(self, P, owner, starts, n):
+        """Per node, the offset along direction ``n[a]`` with the best estimated score
+        (cuts counted as 2 triangles, balance of the rest), among the fragments' extreme
+        positions. Returns (offset, valid) per node."""
+        opt = self.opt
+        eps = opt.epsilon
+        A = len(starts) - 1
+        proj = np.einsum("lkc,lc->lk", P, n[owner])
+        lo, hi = proj.min(1), proj.max(1)
+        base = owner * 8.0
+        klo = np.sort(base + lo)
+        khi = np.sort(base + hi)
+        m = (starts[1:] - starts[:-1])[owner]
+        res = []
+        for t in (hi, lo):
+            a_ = np.searchsorted(klo, base + t - eps, "left") - starts[owner]
+            bn = starts[owner + 1] - np.searchsorted(khi, base + t + eps, "right")
+            sc = opt.split_weight * 2.0 * np.maximum(0, a_ + bn - m) + opt.balance_weight * np.abs(bn - a_)
+            ok = (m - a_ > 0) & (m - bn > 0)
+            res.append((t, np.where(ok, sc, np.inf)))
+        t = np.concatenate([res[0][0], res[1][0]])
+        sc = np.concatenate([res[0][1], res[1][1]])
+        own = np.concatenate([owner, owner])
+        o = np.lexsort((sc, own))
+        firsts = np.ones(len(o), bool)
+        firsts[1:] = own[o][1:] != own[o][:-1]
+        pick = o[firsts]
+        out_t = np.zeros(A)
+        out_ok = np.zeros(A, bool)
+        out_t[own[pick]] = t[pick]
+        out_ok[own[pick]] = np.isfinite(sc[pick])
+        return out_t, out_ok
 
     def gap(self, lo, hi, owner, starts):
         """Per node, the most balanced position along an axis that no fragment straddles."""
@@ -507,6 +667,12 @@ class _Builder:
             # ---- plane choice
             t = time.perf_counter()
             planes, world, found = self.choose(fids, owner, starts, rng, *peeled)
+            if level == 0 and opt.root_plane is not None and len(node_of) == 1:
+                planes[0] = opt.root_plane
+                world[0] = opt.root_plane
+                found[0] = True
+            if opt.capture is not None:
+                opt.capture.append((fids.copy(), starts.copy(), planes.copy()))
             self.stats["choose_seconds"] += time.perf_counter() - t
             if not found.all():
                 # no candidate made progress (rounded normals can miss a huge face by more than

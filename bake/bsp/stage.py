@@ -18,7 +18,7 @@ from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
 from ..scratch.numbers import format_numbers, json_array, project_json_bytes
-from .encode import Encoded, encode
+from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
 from .split import FaceStore, face_planes
 
@@ -255,8 +255,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     return new, rec
 
 
-_NODES_DOC = ("BSP records (0 leaf: first, n; 1 peel: first, np, ns; >=2 split: plane+1, back, first, "
-              "nA, nB; <=-2: with two-sided nD) — docs/formats-bsp.md")
+_NODES_DOC = NODES_DOC
 _PLANES_DOC = "a, b, c, d per BSP plane (eye in front when a*x + b*y + c*z - d >= 0)"
 
 __all__ = ["stage", "build", "write_scene", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]

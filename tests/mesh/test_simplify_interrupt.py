@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import pty
 import select
 import signal
@@ -104,11 +105,16 @@ class _Terminal:
                 return self.text
             self.text += chunk.decode(errors="replace")
 
+    @property
+    def plain(self) -> str:
+        """What was printed, without the terminal's colour and cursor codes."""
+        return re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", self.text)
+
     def wait_for(self, needle: str, timeout: float) -> bool:
         end = time.monotonic() + timeout
-        while needle not in self.text and time.monotonic() < end and self.p.poll() is None:
+        while needle not in self.plain and time.monotonic() < end and self.p.poll() is None:
             self.read(0.05)
-        return needle in self.text
+        return needle in self.plain
 
     def finish(self, timeout: float = 900) -> int:
         end = time.monotonic() + timeout
@@ -139,14 +145,14 @@ def test_ctrl_c_during_simplify_exits_130_and_leaves_outputs(tmp_path):
     for f in (0.05, 0.2, 0.35, 0.5, 0.65, 0.8):
         term = _Terminal(bake, tmp_path)
         assert term.wait_for("bake: simplify", 300), term.text[-2000:]
-        seen = len(term.text)
+        seen = len(term.plain)
         term.read(f * length)
-        during = "bake: export" not in term.text[seen:] and term.p.poll() is None
+        during = "bake: export" not in term.plain[seen:] and term.p.poll() is None
         term.p.send_signal(signal.SIGINT)  # what Ctrl-C at the terminal sends
         code = term.finish()
         hits += during
         assert code == 130, (f, code, term.text[-1500:])
-        assert "bake: interrupted" in term.text and not any(c in term.text for c in CRASH), term.text[-1500:]
+        assert "bake: interrupted" in term.plain and not any(c in term.plain for c in CRASH), term.plain[-1500:]
         if during:
             assert _snapshot(out) == snapshot, f"outputs changed by a bake interrupted at {f:.0%} of simplify"
     assert hits >= 4, f"only {hits} of 6 interrupts landed during simplify"

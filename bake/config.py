@@ -88,16 +88,20 @@ class SimplifyConfig:
     # fast: fast-simplification. quality: MeshLab quadric edge collapse (slow).
     method: Literal["meshopt", "fast", "quality"] = "meshopt"
     # After simplifying, least-squares refit of vertex positions to the original surface
-    # (rounds; 0 = off). Borders and material edges stay where they are.
+    # (rounds; 0 = off). Vertices on open borders (with preserve_border) and on material edges
+    # are never moved: they stay input vertices on the input's borders and edges.
     fit_iterations: int = 3
-    # Needs measure_error: rounds of keeping the input vertices where the measured error peaks
-    # and simplifying again; the better result is kept (0 = off).
+    # Needs measure_error: rounds of local repair where the measured error peaks (edges turned,
+    # free corners moved to lower the local maximum); kept only if the measured max drops (0 = off).
     refine_rounds: int = 2
     # With a triangle target: never accept a result whose measured error (fraction of the
     # diagonal) exceeds this; stop at more triangles instead and say so (0 = no ceiling).
     error_ceiling: float = 0.05
     preserve_border: bool = True
     preserve_materials: bool = True
+    # The symmetric Hausdorff error in the record: a grid of about error_samples points on each
+    # surface (every vertex, points along every edge and inside every triangle), refined around
+    # the largest distances; a sampled maximum (the record gives the sample), never called exact.
     measure_error: bool = True
     error_samples: int = 20000
     seed: int = 0

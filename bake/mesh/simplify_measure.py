@@ -255,17 +255,6 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
     return cand[first[:k]]
 
 
-def _could_exceed(P: np.ndarray, D: np.ndarray, cells: np.ndarray, level: float) -> np.ndarray:
-    """(c,) whether a cell could hold a distance above ``level``: the distance to a surface is
-    1-Lipschitz, so inside a cell it is at most its smallest corner value plus its longest edge
-    (corner values are the measured ones; cells that fail this cannot raise the maximum)."""
-    if len(cells) == 0:
-        return np.zeros(0, bool)
-    Pc = P[cells]
-    longest = np.sqrt(np.max([((Pc[:, i] - Pc[:, (i + 1) % 3]) ** 2).sum(axis=1) for i in range(3)], axis=0))
-    return D[cells].min(axis=1) + longest >= level
-
-
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
              verify: bool = True, straddling: bool = False) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
@@ -324,13 +313,8 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         return n_pts + np.arange(len(new))
 
     if straddling:
-        # only cells that could hold a distance above the largest so far: the distance is
-        # 1-Lipschitz, so inside a cell it is at most its smallest corner value plus the cell's
-        # longest edge; the other straddling cells cannot raise the maximum
-        cells = st["cells"]
-        N = st["N"][cells]
-        could = _could_exceed(P, d, cells, float(d.max()))
-        split(np.flatnonzero(((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2])) & could))
+        N = st["N"][st["cells"]]
+        split(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2])))
     apart = grid.spacing
     pool = np.arange(len(st["P"]))  # where the next seeds are looked for: the last seeds and new points
     for r in range(rounds):
@@ -340,7 +324,6 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         hot = np.zeros(len(allP), bool)
         hot[top] = True
         sel = np.flatnonzero(hot[st["cells"]].any(axis=1))
-        sel = sel[_could_exceed(allP, allD, st["cells"][sel], float(allD.max()))]
         if len(sel) == 0:
             break
         pool = np.concatenate([top, split(sel)])
@@ -387,8 +370,7 @@ class HausdorffResult:
 
 def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, points: int = 20000,
               index_a: SurfaceIndex | None = None, grid_a: SurfaceGrid | None = None,
-              index_b: SurfaceIndex | None = None, seeds: int | None = None, rounds: int | None = None
-              ) -> HausdorffResult:
+              index_b: SurfaceIndex | None = None, seeds: int = SEEDS, rounds: int = ROUNDS) -> HausdorffResult:
     """Symmetric Hausdorff distance between surface A (original) and B (simplified), each
     direction on a grid of about ``points`` points refined around its peaks."""
     Fa = np.asarray(Fa, np.int64).reshape(-1, 3)
@@ -402,8 +384,6 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     gb = surface_grid(Vb, Fb, points, min_level=MIN_LEVEL_SIMPLIFIED)
     # the original's side is cheap to measure (the simplified mesh is small): its cells that
     # straddle two triangles of the simplified mesh are cut once, and four times the seeds
-    seeds = SEEDS if seeds is None else seeds
-    rounds = ROUNDS if rounds is None else rounds
     ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=True)
     ba = directed(ia, gb, seeds=seeds, rounds=rounds)
     worst = ab.worst if ab.max >= ba.max else ba.worst

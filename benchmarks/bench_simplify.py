@@ -3,7 +3,8 @@ vertex order, with the stage's seconds next to the bare library call's, side by 
 
     .venv/bin/python benchmarks/bench_simplify.py [--models bunny,spot,teapot,boolean]
         [--ratios 0.5,0.1,0.02,0.01] [--orderings given,right,shuffle1,...,shuffle5]
-        [--before GIT_REF] [--no-methods] [--no-sweep] [--out benchmarks/results/simplify.json]
+        [--before GIT_REF] [--no-methods] [--no-sweep] [--no-speed] [--out benchmarks/results/simplify.json]
+    .venv/bin/python benchmarks/bench_simplify.py --derive benchmarks/results/simplify.json
 
 Rows (``rows`` in the JSON; issue 19's table): model x ratio x ordering with the default stage
 (``method = "meshopt"``, ``fit_iterations = 3``, ``refine_rounds = 2``):
@@ -284,7 +285,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-sweep", action="store_true")
     ap.add_argument("--no-speed", action="store_true")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simplify.json"))
+    ap.add_argument("--derive", metavar="FILE", help="only recompute the derived figures of a results file")
     args = ap.parse_args(argv)
+    if args.derive:
+        res = json.loads(Path(args.derive).read_text())
+        derive(res)
+        Path(args.derive).write_text(json.dumps(res, indent=1) + "\n")
+        return 0
     ratios = [float(r) for r in args.ratios.split(",")]
     t_all = time.perf_counter()
     load_start = os.getloadavg()
@@ -365,7 +372,6 @@ def main(argv: list[str] | None = None) -> int:
                       flush=True)
 
     from bake.mesh import simplify_meshopt
-    summary = summarise(rows)
     result = {
         "command": "benchmarks/bench_simplify.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "load_average_start": load_start,
@@ -377,12 +383,33 @@ def main(argv: list[str] | None = None) -> int:
         "reference": f"tests/mesh/simplify_reference.py: MeshLab Hausdorff filter, {REF_SAMPLES} samples per "
                      f"direction (every vertex, edge points, area-weighted), refined {REF_ROUNDS} times around its "
                      f"worst samples; fractions of the bbox diagonal",
-        "summary": summary, "rows": rows, "speed": speed, "methods": methods, "sweep": sweep,
+        "rows": rows, "speed": speed, "methods": methods, "sweep": sweep,
     }
+    derive(result)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
-    print(json.dumps(summary, indent=1))
+    print(json.dumps(result["summary"], indent=1))
     return 0
+
+
+def derive(result: dict) -> None:
+    """Figures computed from the measured rows (no measuring): the summary of the issue's goals,
+    ``before_after`` (the rows that ran the old stage too), milliseconds for the tables.
+    ``--derive FILE`` recomputes them in an existing results file."""
+    for r in result["rows"] + result.get("methods", []):
+        r["library_ms"] = round(1e3 * r["library_seconds"], 2)
+    for r in result.get("speed", []):
+        r["library_ms_best_of_3"] = round(1e3 * r["library_seconds_best_of_3"], 2)
+    result["summary"] = summarise(result["rows"])
+    result["before_after"] = [
+        {"model": r["model"], "ratio": r["ratio"], "triangles_out": r["triangles_out"],
+         "stage_seconds": r["stage_seconds"], "reported_max": r["reported_max"], "reference_max": r["reference_max"],
+         "folds": r["folds_independent"], "before_stage_seconds": r["before"]["stage_seconds"],
+         "before_reported_max": r["before"]["reported_max"], "before_reference_max": r["before"]["reference_max"],
+         "before_reported_over_reference": r["before"]["reported_over_reference"],
+         "before_reported_exact": r["before"]["reported_exact"], "before_folds": r["before"]["folds_independent"],
+         "speedup": round(r["before"]["stage_seconds"] / r["stage_seconds"], 2)}
+        for r in result["rows"] if r.get("before")]
 
 
 def summarise(rows: list[dict]) -> dict:

@@ -1222,10 +1222,9 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         measure of the result; the fit is kept only if its measured max is not above
         _FIT_TOLERANCE times the unfitted result's. A least-squares fit pulls sharp CSG/CAD
         corners off their places (boolean.glb at 50%: 0.96% of the diagonal with it, 0.09%
-        without), so the unfitted
-        result is measured too: first with _FIT_CHECK_ROUNDS refinement rounds (a subset of the
-        full measure's points, so its max can only be lower than the full one), in full only if
-        that does not already show the fit is no worse."""
+        without), so the unfitted result is measured too: first with _FIT_CHECK_ROUNDS
+        refinement rounds (a subset of the full measure's points, so its max can only be lower
+        than the full one), in full only if that does not already settle it."""
         o1 = _fit(ctx, out)
         if not measuring:
             return o1, None

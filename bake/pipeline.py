@@ -20,6 +20,7 @@ from .config import Config, ImportJob
 from .errors import BakeError, ConfigError, InputError, StageError
 from .record import StageRecord
 from .scene import MAX_COORDINATE, MIN_EXTENT, Scene
+from .scratch.numbers import position_decimals
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,19 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 
+# Stages that build on the positions as the export will write them (docs/formats.md, "Numbers").
+GRID_USERS = ("bsp", "export")
+
+
+def with_grid(scene: Scene, cfg: Config) -> Scene:
+    """The scene with the grid its positions will be written on (``export.precision`` of the
+    scene's size), fixed once, before the first stage in GRID_USERS runs. Stages read it from the
+    scene, never from the export section."""
+    if scene.position_decimals is not None or not cfg.export.enabled:
+        return scene
+    return scene.replace(position_decimals=position_decimals(scene.scale(), cfg.export.precision))
+
+
 def stage_names() -> list[str]:
     return [s.name for s in STAGES]
 
@@ -109,6 +123,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             skipped.append({"name": spec.name, "ran": False, "reason": reason})
             continue
         fn = spec.load()
+        if spec.name in GRID_USERS:
+            scene = with_grid(scene, cfg)
         if progress:
             progress(spec.name, "start")
         counts_in = counts(scene)

@@ -34,7 +34,8 @@ from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
-from ..scratch.numbers import decimals_for, format_numbers, json_array, project_json_bytes, render_items
+from ..scratch.numbers import (decimals_for, format_numbers, json_array, position_decimals, project_json_bytes,
+                               render_items, round_positions)
 
 def list_file_name(name: str) -> str:
     """A safe file name for a list (Scratch ignores the file name on import)."""
@@ -70,11 +71,15 @@ def _whole_polygons(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
 def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
     n = cfg.names
     out: list[ScratchList] = []
-    diag = scene.scale()
-    dec = decimals_for(diag * 10.0 ** (-cfg.precision))
+    # the grid the pipeline fixed on the scene (the BSP built on it); a scene run through this
+    # stage alone gets it from export.precision
+    dec = scene.position_decimals
+    if dec is None:
+        dec = position_decimals(scene.scale(), cfg.precision)
     T = scene.n_triangles
     tris = scene.triangles if scene.triangles is not None else np.zeros((0, 3), np.int64)
     mats = scene.tri_material if scene.tri_material is not None else np.zeros(0, np.int64)
+    _warn_collapsed(scene, tris, dec, record)
 
     if cfg.vertices:
         out.append(ScratchList(n.vertices, scene.positions.ravel(), 3, "x, y, z per vertex", "number", dec))
@@ -152,6 +157,22 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
                                "lightmap u1, v1, u2, v2, u3, v3 per triangle (v up)", "number",
                                decimals_for(0.1 / side)))  # a tenth of a texel
     return out
+
+
+def _warn_collapsed(scene: Scene, tris: np.ndarray, dec: int, record: StageRecord) -> None:
+    """Triangles whose written (rounded) corners are collinear: a filler that strokes edges
+    draws them as lines. Counted in the record and named in a warning."""
+    if len(tris) == 0:
+        return
+    p = round_positions(scene.positions, dec)[tris]
+    flat = ~np.any(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) != 0, axis=1)
+    n = int(flat.sum())
+    record.details["collinear_triangles"] = n
+    if n:
+        first = ", ".join(str(int(t) + 1) for t in np.flatnonzero(flat)[:6])
+        record.warn(f"{n} triangle(s) have zero area at the written positions (rounded to {10.0 ** -dec:g}): "
+                    f"tris {first}{', ...' if n > 6 else ''}; a pen filler that strokes edges draws them "
+                    "as lines (raise export.precision, or bake with bsp, which drops them)")
 
 
 def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:

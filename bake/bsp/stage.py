@@ -19,6 +19,7 @@ from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
 from ..scratch.numbers import format_numbers, json_array, project_json_bytes, round_positions
+from .cost import blocks_estimate, walk_counts
 from .encode import Encoded, encode
 from .merge import SourceFaces, merge_coplanar
 from .split import FaceStore, face_planes
@@ -234,6 +235,21 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
                  "input_source_face": in_face}
 
 
+def typical_walk(scene: Scene, enc: Encoded) -> dict:
+    """One frame's walk from the eye the reader sprite starts with (bake.scratch.project.auto_camera:
+    in front of, above and left of the model): records, plane tests, triangles tested and drawn,
+    and the Scratch blocks that costs (bake/bsp/cost.py)."""
+    from ..scratch.project import auto_camera
+
+    cam = auto_camera(scene.positions[scene.used_vertex_mask()])
+    eye = [cam.x, cam.y, cam.z]
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    counts = walk_counts(enc.nodes, enc.planes, scene.triangles, scene.positions, two, eye)
+    return {"eye": eye, **counts, "plane_tests": counts["split"] + counts["split_two_sided"],
+            "blocks_estimate": blocks_estimate(counts)}
+
+
 def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tuple[int, int]:
     """(items, project.json bytes) of a list written as short JSON numbers."""
     items = format_numbers(np.asarray(values), decimals, name=name)
@@ -292,6 +308,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
                     "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
         "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
     }
+    rec.details["walk"] = typical_walk(new, enc)
     if src.dropped:
         rec.warn(f"{src.dropped} triangle(s) have zero area at the written positions (rounded to "
                  f"{10.0 ** -scene.position_decimals:g}) and were left out")

@@ -425,23 +425,30 @@ class _Builder:
             within = np.arange(int(lc.sum())) - seg[rep]
             f = fpos[foff[cn][rep] + within]
             a, b, c, w = (comp[i, i0:i1][rep] for i in range(4))
-            mn = mx = on_c = None
+            fc = cnt[f]
+            # corners 0-2 of every fragment, further corners only where a fragment has them (the
+            # padding repeats corner 0 and would change nothing)
             for k in range(K):
-                d = a * Pc[0, k][f] + b * Pc[1, k][f] + c * Pc[2, k][f] - w
-                if exact:
-                    on = np.abs(d) <= eps
-                    if on_c is None:
-                        on_c, on0 = on.astype(np.int8), on
-                    else:
-                        on_c += on
-                if mn is None:
-                    mn, mx = d, d.copy()
+                sel = None if k < 3 else np.flatnonzero(fc > k)
+                if sel is not None and len(sel) == 0:
+                    break
+                ff = f if sel is None else f[sel]
+                q = Pc[:, k, ff]  # (3, n) one gather of the corner's coordinates
+                if sel is None:
+                    d = a * q[0] + b * q[1] + c * q[2] - w
                 else:
+                    d = a[sel] * q[0] + b[sel] * q[1] + c[sel] * q[2] - w[sel]
+                on = np.abs(d) <= eps
+                if k == 0:
+                    mn, mx, on_c = d, d.copy(), on.astype(np.int8)
+                elif sel is None:
                     np.minimum(mn, d, out=mn)
                     np.maximum(mx, d, out=mx)
-            fc = cnt[f]
-            if exact and K > 3:
-                on_c -= (K - fc).astype(np.int8) * on0  # padding repeats corner 0
+                    on_c += on
+                else:
+                    mn[sel] = np.minimum(mn[sel], d)
+                    mx[sel] = np.maximum(mx[sel], d)
+                    on_c[sel] += on
             has_b, has_f = mn < -eps, mx > eps
             dg = deg[f]
             if dg.any():  # degenerate fragments are never cut: they go with their middle

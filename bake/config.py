@@ -335,8 +335,8 @@ class ExportConfig:
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
-    # Positions are rounded to this many significant digits of the model's size: a step of
-    # diagonal * 10^-precision.
+    # Positions are written on a grid: the step is the largest power of ten <= diagonal *
+    # 10^-precision (bake.scratch.numbers.position_decimals; the BSP builds on the same grid).
     precision: int = 5
     color_format: Literal["rgb", "argb", "hex"] = "rgb"
     names: ListNames = field(default_factory=ListNames)

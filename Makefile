@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench fuzz clean
+.PHONY: demo test bench doc-tables fuzz clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,11 @@ test: $(STAMP) vm/node_modules
 bench: $(STAMP) vm/node_modules
 	mkdir -p benchmarks/results
 	set -e; for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b; done
+	$(BIN)/python tools/doc_tables.py
+
+# Re-render the docs' tables from benchmarks/results/*.json (what `make bench` wrote).
+doc-tables: $(STAMP)
+	$(BIN)/python tools/doc_tables.py
 
 # Fuzz the OBJ/MTL, glTF and .sb3 readers with atheris (not part of `test`); FUZZ_SECONDS per reader.
 fuzz: $(STAMP)

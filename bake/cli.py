@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 import traceback
 from pathlib import Path
 from typing import Any, Callable
@@ -57,28 +58,107 @@ def _default_out(target: Path) -> Path:
     return Path("bake-out") / target.stem
 
 
+def _wrote_lines(out: Path, rep: dict[str, Any], cfg: config_mod.Config) -> list[str]:
+    """What the bake left in ``out``: the projects by name first, then lists and reports."""
+    done = [k for k, v in rep.get("outputs", {}).items() if v != "removed"]
+    export = next((s for s in rep.get("stages", []) if s["name"] == "export"), {})
+    into = (export.get("details") or {}).get("into") or {}
+    projects = [k for k in done if k.endswith((".sb3", ".sprite3")) and k != into.get("file")]
+    n_lists = sum(1 for k in done if k.startswith("lists/"))
+    n_assets = sum(1 for k in done if k.startswith("assets/"))
+    parts = projects[:]
+    if cfg.export.json_name in done:
+        parts.append(cfg.export.json_name)
+    if n_lists:
+        parts.append(f"lists/ ({n_lists} files)")
+    if n_assets:
+        parts.append(f"assets/ ({n_assets} PNG)")
+    parts += ["report.md", "report.json"] + (["report.html"] if cfg.report.html else [])
+    lines = [f"  wrote {out}/: {', '.join(parts)}"]
+    if into.get("file"):
+        lines.append(f"  wrote {out / into['file']}: {into.get('project')} with these lists in "
+                     f"'{into.get('target', 'Stage')}'")
+    return lines
+
+
 def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfile: Path | None) -> dict[str, Any]:
     from . import pipeline
     from .export import output, report
 
+    output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
+    _check_into(cfg)
     prog = _Progress(quiet)
     cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
     try:
         result = pipeline.run(cfg, progress=prog)
+        if prog.enabled:
+            prog("writing outputs", "start")
+        rep = output.finish(result, out, depfile=depfile)
     finally:
         prog.stop()
-    rep = output.finish(result, out, depfile=depfile)
     if not quiet:
         for line in report.summary_lines(rep):
             print(line)
-        extra = ", report.html" if cfg.report.html else ""
-        print(f"  wrote {out}/ (report.md, report.json{extra}, lists)")
+        for line in _wrote_lines(out, rep, cfg):
+            print(line)
     if strict or cfg.report.strict:
         bad = [lim for lim in rep["limits"] if not lim["ok"]]
+        problems = rep.get("problems", [])
+        what = []
         if bad:
-            raise LimitError(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
-                             f"{bad[0]['limit']}; see {out / 'report.md'}")
+            what.append(f"{len(bad)} limit(s) exceeded, first: {bad[0]['name']} = {bad[0]['value']} > "
+                        f"{bad[0]['limit']}")
+        if problems:
+            what.append(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
+                        f"{problems[0]['message']}")
+        if what:
+            raise LimitError("; ".join(what) + f"; see {out / 'report.md'}")
     return rep
+
+
+def _model_path(cfg: config_mod.Config) -> Path | None:
+    if not cfg.input.path:
+        return None
+    p = Path(cfg.input.path)
+    return p if p.is_absolute() else cfg.base_dir / p
+
+
+def _known_inputs(cfg: config_mod.Config) -> list[Path]:
+    """Files the bake will read, known before it starts (the importers find the rest)."""
+    out = [p for p in (_model_path(cfg), cfg.source) if p is not None]
+    if cfg.export.into:
+        out.append(Path(cfg.export.into))
+    return out
+
+
+def _known_outputs(cfg: config_mod.Config) -> list[str]:
+    """Output names known before the bake starts."""
+    ex = cfg.export
+    model = _model_path(cfg)
+    stem = model.stem if model is not None else "model"
+    names = [ex.json_name] if ex.json else []
+    sb3_name = ex.sb3_name or f"{stem}.sb3"
+    if ex.sb3:
+        names.append(sb3_name)
+    if ex.sprite3:
+        names.append(f"{Path(sb3_name).stem}.sprite3")
+    if ex.into:
+        names.append(ex.into_name or f"{Path(ex.into).stem}-{stem}.sb3")
+    return names
+
+
+def _check_into(cfg: config_mod.Config) -> None:
+    """``export.into``: the project must be there and readable, with the target sprite, before the
+    bake starts (not found out after it)."""
+    if not cfg.export.into or not cfg.export.enabled:
+        return
+    from .scratch.sb3 import merge_into
+
+    src = Path(cfg.export.into)
+    if not src.is_file():
+        raise InputError("export.into: project not found" if not src.exists() else
+                         "export.into: not a file", path=src)
+    merge_into(src, cfg.export.into_target or "Stage", {})
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -168,7 +248,18 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         reference = rvals[0]
     out_dir = Path(args.out) if args.out else _default_out(target)
     out = out_dir / "sweeps" / key
-    table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out)
+    from .export import output
+
+    output.check_paths(out_dir)
+    if out_dir.is_dir() and (out_dir / "sweeps").exists():
+        output.check_paths(out_dir / "sweeps", label="--out (sweeps/)")
+    t0 = time.perf_counter()
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"bake sweep [{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out, progress=progress)
     html_written = False
     if (out_dir / "report.json").is_file() and cfg.report.html:  # show it in the bake's report
         from .export import html
@@ -224,13 +315,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
-    cfg = config_mod.Config()
-    for key in config_mod.all_keys():
-        try:
-            val = config_mod.get_key(cfg, key)
-        except BakeError:
-            val = "?"
-        print(f"{key} = {json.dumps(val) if not isinstance(val, list) else json.dumps(config_mod.to_dict(val))}")
+    # arrays of tables list their fields too: lighting.lights[].kind = "sun", ...
+    for key, val in config_mod.key_defaults():
+        print(f"{key} = {json.dumps(val)}")
     return 0
 
 
@@ -252,7 +339,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")
     r.add_argument("--out", help="output folder (default: bake-out/<name>)")
     r.add_argument("--depfile", help="write Make-style dependencies to this file")
-    r.add_argument("--strict", action="store_true", help="exit 4 if a Scratch limit is exceeded")
+    r.add_argument("--strict", action="store_true",
+                   help="exit 4 if a Scratch limit is exceeded or the bake has a problem (e.g. all-black lighting)")
     common(r)
     r.set_defaults(func=cmd_run)
 
@@ -304,10 +392,35 @@ def build_parser() -> argparse.ArgumentParser:
 _EXTRA_COMMANDS: list[Callable[[Any, Callable], None]] = []
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised like Ctrl-C so every temporary file is cleaned up on the way out."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _terminate(signum: int, _frame: Any) -> None:
+    raise Terminated(signum)
+
+
+def _catch_termination() -> None:
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for name in ("SIGTERM", "SIGHUP"):
+        s = getattr(signal, name, None)
+        if s is not None and signal.getsignal(s) in (signal.SIG_DFL, None):
+            signal.signal(s, _terminate)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     debug = getattr(args, "debug", False)
+    _catch_termination()
     try:
         return int(args.func(args) or 0)
     except BakeError as e:
@@ -318,9 +431,14 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # e.g. `bake keys | head`
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
-        print("bake: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        from .export import write
+
+        what = "terminated" if isinstance(e, Terminated) else "interrupted"
+        state = ("after the outputs were written (the output folder is the new bake's)" if write.COMMITTED else
+                 "before any output was written (the output folder is as it was)")
+        print(f"bake: {what} {state}", file=sys.stderr)
+        return 128 + e.signum if isinstance(e, Terminated) else 130
     except Exception as e:  # a bug: one line, traceback with --debug
         if debug:
             traceback.print_exc()

@@ -159,7 +159,7 @@ class BVHConfig:
     quant_bits: int = 6  # bits per quantised box plane (2..8)
     # list coordinates are rounded to a power of ten <= diagonal * 10^-precision (0 = exact)
     precision: int = 5
-    high_seconds: float = 20.0  # time budget of the reinsertion optimiser (quality = "high")
+    high_effort: float = 10.0  # work budget of the reinsertion optimiser (quality = "high"), millions of node visits
     list_prefix: str = "bvh"  # lists are "<prefix> nodes", "<prefix> tris", "<prefix> tri ids"
 
 
@@ -269,6 +269,9 @@ class LightmapConfig:
     cache_dir: str = ""
     # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
     out_dir: Path | None = field(default=None, metadata={"internal": True})
+    # Whether the lighting stage will fill the atlas (lighting.target = "lightmap"; not a TOML key:
+    # the pipeline sets it): the memory estimate then counts the texel bake too.
+    lit: bool = field(default=True, metadata={"internal": True})
 
 
 @dataclass
@@ -317,6 +320,7 @@ class ListNames:
     vertex_colors: str = "vert colors"
     uvs: str = "tri uvs"
     lightmap_uvs: str = "lightmap uvs"
+    two_sided: str = "mat two-sided"
     quads: str = "quads"
     ngons: str = "ngons"
 
@@ -332,11 +336,16 @@ class ExportConfig:
     vertex_colors: Literal["auto", "yes", "no"] = "auto"
     uvs: Literal["auto", "yes", "no"] = "auto"
     lightmap_uvs: Literal["auto", "yes", "no"] = "auto"  # auto: when the scene has a lightmap atlas
+    # Which materials are two-sided (1) or single-sided (0), one item per material in "mat colors"
+    # order. auto: when a material is two-sided or a BSP tree is written (its walk skips
+    # single-sided triangles that face away); without the list every material is single-sided.
+    two_sided: Literal["auto", "yes", "no"] = "auto"
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
-    # Positions are written on a grid: the step is the largest power of ten <= diagonal *
-    # 10^-precision (bake.scratch.numbers.position_decimals; the BSP builds on the same grid).
+    # Positions are rounded to this many significant digits of the model's size: a step of the
+    # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
+    # bake.scratch.numbers.position_decimals, the grid the BSP builds on too).
     precision: int = 5
     color_format: Literal["rgb", "argb", "hex"] = "rgb"
     names: ListNames = field(default_factory=ListNames)
@@ -362,7 +371,7 @@ class ExportConfig:
 
 @dataclass
 class ReportConfig:
-    strict: bool = False  # an exceeded limit makes the bake exit non-zero
+    strict: bool = False  # like --strict: an exceeded limit or a problem (all-black lighting) exits 4
     html: bool = True  # write report.html (previews, limit bars, stage table, sweeps)
     preview_width: int = 320  # pixels per preview image (height is 3/4 of it)
 
@@ -382,6 +391,8 @@ class Config:
     # Where the config came from (not a TOML key): paths in it are relative to this folder.
     base_dir: Path = field(default_factory=Path.cwd, metadata={"internal": True})
     source: Path | None = field(default=None, metadata={"internal": True})
+    # Every key set explicitly, and where: "file" (the config) or the --set assignment that set it.
+    given: dict[str, str] = field(default_factory=dict, metadata={"internal": True})
 
 
 @dataclass(frozen=True)
@@ -422,7 +433,60 @@ def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
     return out
 
 
-def _suggest(key: str, candidates: list[str]) -> str:
+# Words authors reach for, and the key bake calls that thing (matched per dotted component).
+_SYNONYMS = {"occlusion": "ao", "ambient_occlusion": "ao", "ambientocclusion": "ao", "ssao": "ao",
+             "shadow": "shadows", "bounce": "bounces", "gi": "bounces", "indirect": "bounces",
+             "light": "lights", "lamp": "lights", "lamps": "lights", "simplification": "simplify",
+             "decimate": "simplify", "decimation": "simplify", "texture": "textures", "uv": "uvs",
+             "lightmaps": "lightmap", "colour": "color", "colours": "colors", "centre": "center",
+             "triangulation": "triangulate", "cleanup": "clean", "output": "export", "model": "input"}
+
+
+def _children(cls: Any) -> dict[str, Any]:
+    """TOML name -> type of each key of a section (list[Section] as Section)."""
+    hints = get_type_hints(cls)
+    out = {}
+    for name in _fields(cls):
+        t = hints[name]
+        if get_origin(t) in (list, typing.List) and get_args(t) and dataclasses.is_dataclass(get_args(t)[0]):
+            t = get_args(t)[0]
+        out[_toml_name(name)] = t
+    return out
+
+
+def _walk_suggestion(parts: list[str], *, table: bool) -> str | None:
+    """Mend a dotted key one component at a time, from the top: a known name stays, a synonym
+    or the closest name at that level replaces an unknown one (``lightning.enabled`` ->
+    ``lighting.enabled``, ``lighting.occlusion`` -> ``lighting.ao``)."""
+    cls: Any = Config
+    out = []
+    for i, raw in enumerate(parts):
+        if not dataclasses.is_dataclass(cls):
+            return None
+        name, _, index = raw.partition("[")
+        kids = _children(cls)
+        last = i == len(parts) - 1
+        # at the last component of a table, or on the way down, only sections fit; else keys
+        fits = [k for k, t in kids.items() if dataclasses.is_dataclass(t) == (table or not last)]
+        if name not in kids or (last and name not in fits):
+            syn = _SYNONYMS.get(name.lower())
+            if syn in fits:
+                name = syn
+            else:
+                close = difflib.get_close_matches(name, fits, n=1, cutoff=0.6)
+                if not close:
+                    return None
+                name = close[0]
+        out.append(name + (f"[{index}" if index else ""))
+        cls = kids[name]
+    return ".".join(out)
+
+
+def _suggest(key: str, candidates: list[str], *, table: bool = False) -> str:
+    """``; did you mean 'x'?`` for an unknown ``key`` (a table: ``table=True``), or ""."""
+    mended = _walk_suggestion(key.split("."), table=table)
+    if mended and mended != key:
+        return f"; did you mean [{mended}]?" if table else f"; did you mean '{mended}'?"
     close = difflib.get_close_matches(key, candidates, n=1, cutoff=0.5)
     if not close:
         # try the last component against the last components
@@ -433,16 +497,45 @@ def _suggest(key: str, candidates: list[str]) -> str:
     return f"; did you mean '{close[0]}'?" if close else ""
 
 
+def _typos(a: str, b: str) -> int:
+    """Edits (insert, delete, substitute, swap two neighbours) from ``a`` to ``b``: ``angel`` is
+    one swap from ``angle`` and two edits from ``range`` (difflib rates both alike). Names are a
+    few letters long, so the quadratic table is nothing."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
+
+
+def _closest_field(name: str, fields: list[str]) -> list[str]:
+    """The field a misspelt ``name`` most likely meant (fewest edits, then difflib's ratio), if
+    it is within a third of the name's length; else difflib's closest (``[]`` if none)."""
+    if not fields:
+        return []
+    best = min(fields, key=lambda f: (_typos(name, f), -difflib.SequenceMatcher(None, name, f).ratio()))
+    if _typos(name, best) <= max(1, len(name) // 3):
+        return [best]
+    return difflib.get_close_matches(name, fields, n=1, cutoff=0.5)
+
+
 class _Where:
     """Finds the line of a dotted key in the TOML text, for messages."""
 
-    def __init__(self, text: str | None, path: Path | None):
+    def __init__(self, text: str | None, path: Path | None, origin: str = "file"):
         self.lines = text.splitlines() if text else []
         self.path = path
+        self.origin = origin  # "file", or the --set assignment being applied
+        self.given: dict[str, str] = {}  # keys set, -> origin
 
     def line_of(self, key: str) -> int | None:
         if not self.lines:
             return None
+        m = re.match(r"^(?P<table>[\w.]+)\[(?P<index>\d+)\](?:\.(?P<rest>.+))?$", key)
+        if m:  # a field of the n-th [[table]] (e.g. lighting.lights[1].angle)
+            return self._element_line(m.group("table"), int(m.group("index")), m.group("rest"))
         parts = key.split(".")
         last = re.escape(parts[-1].split("[")[0])
         section = ".".join(parts[:-1])
@@ -464,7 +557,45 @@ class _Where:
                     found = i
         return found
 
+    def is_header(self, key: str) -> bool:
+        """Whether ``key`` is written as a ``[table]`` (or ``[[table]]``) header in the file."""
+        line = self.line_of(key)
+        return line is not None and self.lines[line - 1].strip().startswith("[")
+
+    def _element_line(self, table: str, index: int, rest: str | None) -> int | None:
+        """The line of ``rest`` (a field, or None for the element itself) in the ``index``-th
+        ``[[table]]`` block; for an inline array (``lights = [{...}, ...]``) the line naming the
+        field after the array starts, else the array's line."""
+        seen = -1
+        start = None
+        for i, raw in enumerate(self.lines, 1):
+            s = raw.strip()
+            h = re.match(r"^\[\[\s*([^\]]+?)\s*\]\]$", s)
+            if start is not None and re.match(r"^\[", s):
+                break  # the next table header ends the block
+            if h and h.group(1).replace(" ", "") == table:
+                seen += 1
+                if seen == index:
+                    start = i
+                    if rest is None:
+                        return i
+            elif start is not None and rest is not None and re.match(rf"^{re.escape(rest.split('.')[0])}\s*=", s):
+                return i
+        if start is not None:
+            return start
+        name = table.rsplit(".", 1)[-1]
+        for i, raw in enumerate(self.lines, 1):  # inline: lights = [{...}] or lighting.lights = [...]
+            if re.match(rf"^\s*(?:[\w.]*\.)?{re.escape(name)}\s*=", raw):
+                if rest is not None:
+                    for j in range(i, len(self.lines) + 1):
+                        if re.search(rf"\b{re.escape(rest.split('.')[0])}\s*=", self.lines[j - 1]):
+                            return j
+                return i
+        return None
+
     def error(self, key: str, msg: str) -> ConfigError:
+        if self.origin != "file":
+            return ConfigError(f"{msg} (from {self.origin} on the command line)", key=key)
         return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
 
 
@@ -525,6 +656,13 @@ def _convert(value: Any, t: Any, key: str, where: _Where) -> Any:
     return value
 
 
+def _leaves(value: dict, prefix: str) -> list[str]:
+    out = []
+    for k, v in value.items():
+        out.extend(_leaves(v, f"{prefix}.{k}") if isinstance(v, dict) and v else [f"{prefix}.{k}"])
+    return out
+
+
 def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) -> Any:
     fields = _fields(cls)
     hints = get_type_hints(cls)
@@ -533,14 +671,25 @@ def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) 
         attr = _ALIASES.get(raw_key, raw_key)
         key = prefix + raw_key
         if attr not in fields:
+            if re.search(r"\[\d+\]\.$", prefix):  # inside [[...]]: the element's own fields, by name
+                close = _closest_field(raw_key, all_keys(cls))
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                raise where.error(key, f"unknown key{hint} (an entry of [[{prefix.split('[')[0]}]] has "
+                                  + ", ".join(all_keys(cls)) + ")")
             known = all_keys(Config)
             sub = [k for k in known if k.startswith(prefix)] if prefix else known
-            raise where.error(key, "unknown key" + _suggest(key, sub or known))
+            leaves = _leaves(value, key) if isinstance(value, dict) else [key]
+            # a [table] header in the file, or a table of several keys: mend the table's name;
+            # a dotted key (--set lightning.enabled=true): mend the whole key
+            if len(leaves) != 1 or (isinstance(value, dict) and where.is_header(key)):
+                raise where.error(key, f"unknown table [{key}]" + _suggest(key, sub or known, table=True))
+            raise where.error(leaves[0], "unknown key" + _suggest(leaves[0], known))
         t = hints[attr]
         if dataclasses.is_dataclass(t) and isinstance(value, dict):
             setattr(obj, attr, _build(t, value, key + ".", where, base=getattr(obj, attr)))
         else:
             setattr(obj, attr, _convert(value, t, key, where))
+            where.given[key] = where.origin
     return obj
 
 
@@ -565,14 +714,18 @@ def load(path: str | Path | None = None, overrides: list[str] | None = None,
             m = re.search(r"line (\d+)", str(e))
             raise ConfigError(f"not valid TOML: {e}", path=src,
                               line=int(m.group(1)) if m else None) from None
-    cfg = _build(Config, data or {}, "", _Where(text, src))
+    where = _Where(text, src)
+    cfg = _build(Config, data or {}, "", where)
+    cfg.given.update(where.given)
     if src is not None:
         cfg.base_dir = src.resolve().parent
         cfg.source = src.resolve()
+    for key in FILE_RELATIVE_KEYS:  # paths in a config are relative to it (input.path: see pipeline)
+        val = get_key(cfg, key)
+        if val and val.strip().lower() != "none" and not Path(val).expanduser().is_absolute():
+            _set_key(cfg, key, str(cfg.base_dir / Path(val).expanduser()))
     for ov in overrides or []:
         apply_override(cfg, ov)
-    if cfg.export.into:  # relative to the config file, like input.path
-        cfg.export.into = str(cfg.base_dir / cfg.export.into)
     validate(cfg)
     return cfg
 
@@ -590,19 +743,126 @@ def apply_override(cfg: Config, assignment: str) -> None:
         raise ConfigError(f"--set expects section.key=value, got {assignment!r}")
     key, text = assignment.split("=", 1)
     key = key.strip()
+    m = re.match(r"^(?P<head>[\w.]+)\[(?P<n>\d+)\]\.(?P<rest>[\w.]+)$", key)
+    if m:  # a field of one element of an array of tables: lighting.lights[0].angle=2
+        where = _Where(None, None, origin=f"--set {key}={text.strip()}")
+        _override_element(cfg, m.group("head"), int(m.group("n")), m.group("rest"), parse_value(text.strip()),
+                          where)
+        cfg.given.update(where.given)
+        return
     parts = key.split(".")
     nested: dict = {}
     cur = nested
     for p in parts[:-1]:
         cur = cur.setdefault(p, {})
-    cur[parts[-1]] = parse_value(text.strip())
-    where = _Where(None, None)
+    value = parse_value(text.strip())
+    if key in PATH_KEYS and isinstance(value, str) and value and value.strip().lower() != "none":
+        # a path typed on the command line is relative to the current folder
+        value = str((Path.cwd() / Path(value).expanduser()).absolute())
+    cur[parts[-1]] = value
+    where = _Where(None, None, origin=f"--set {key}={text.strip()}")
     _build(Config, nested, "", where, base=cfg)
+    cfg.given.update(where.given)
 
 
-def get_key(cfg: Config, key: str) -> Any:
+# Keys that hold paths. From --set they resolve against the current folder; in a config file,
+# FILE_RELATIVE_KEYS against the config's folder (input.path too, in the pipeline; textures.texture
+# is relative to the model's folder, see TexturesConfig).
+PATH_KEYS = ("input.path", "export.into", "textures.texture", "textures.lightmap.cache_dir")
+FILE_RELATIVE_KEYS = ("export.into", "textures.lightmap.cache_dir")
+
+
+def _set_key(cfg: Config, key: str, value: Any) -> None:
+    obj: Any = cfg
+    parts = key.split(".")
+    for p in parts[:-1]:
+        obj = getattr(obj, _ALIASES.get(p, p))
+    setattr(obj, _ALIASES.get(parts[-1], parts[-1]), value)
+
+
+def origin(cfg: Config, key: str) -> str | None:
+    """Where ``key`` was set: "file", "--set KEY=VALUE", or None (its default)."""
+    return cfg.given.get(key)
+
+
+def error_at(cfg: Config, key: str, msg: str) -> ConfigError:
+    """A range error on ``key`` placed where the value came from: the config file and the key's
+    line in it, or the --set assignment on the command line (or just the key, for a default)."""
+    where = cfg.given.get(key)
+    if where is None and "[" in key:  # lighting.lights[0].color: the light's table
+        where = next((v for k, v in cfg.given.items() if k.startswith(key.split("]")[0] + "]")), None)
+    if where is not None and where != "file":
+        return ConfigError(f"{msg} (from {where} on the command line)", key=key)
+    if cfg.source is None:
+        return ConfigError(msg, key=key)
+    try:
+        text = cfg.source.read_text("utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = None
+    line = _Where(text, cfg.source).line_of(key) if where == "file" or where is None else None
+    return ConfigError(msg, path=cfg.source, line=line, key=key)
+
+
+def _element_class(obj: Any, attr: str, key: str) -> type:
+    """The dataclass of the elements of the list field ``attr`` (e.g. LightConfig)."""
+    t = get_type_hints(type(obj)).get(attr) if dataclasses.is_dataclass(obj) else None
+    args = get_args(t) if t is not None and get_origin(t) in (list, typing.List) else ()
+    if not args or not dataclasses.is_dataclass(args[0]):
+        raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
+    return args[0]
+
+
+def _override_element(cfg: Config, head: str, n: int, rest: str, value: Any, where: "_Where | None" = None) -> None:
+    """``--set lighting.lights[n].field=value``: set a field of element ``n``; ``n`` equal to
+    the number of elements adds one with the defaults."""
+    parts = head.split(".")
+    obj: Any = get_key(cfg, ".".join(parts[:-1])) if len(parts) > 1 else cfg
+    attr = _ALIASES.get(parts[-1], parts[-1])
+    cls = _element_class(obj, attr, f"{head}[{n}].{rest}")
+    items = getattr(obj, attr)
+    if n > len(items):
+        raise ConfigError(f"there are {len(items)} element(s); [{len(items)}] adds one", key=f"{head}[{n}]")
+    elem = items[n] if n < len(items) else cls()
+    nested: dict = {}
+    cur = nested
+    rparts = rest.split(".")
+    for p in rparts[:-1]:
+        cur = cur.setdefault(p, {})
+    cur[rparts[-1]] = value
+    _build(cls, nested, f"{head}[{n}].", where or _Where(None, None), base=elem)
+    if n == len(items):
+        items.append(elem)
+
+
+def key_defaults() -> list[tuple[str, Any]]:
+    """Every key with its default, for ``bake keys``: the keys of :func:`all_keys`, and for an
+    array of tables (``[[lighting.lights]]``) each field of one element as ``lighting.lights[].kind``."""
+    cfg = Config()
+    out: list[tuple[str, Any]] = []
+    for key in all_keys():
+        val = get_key(cfg, key)
+        out.append((key, to_dict(val)))
+        *path, last = key.split(".")
+        owner = get_key(cfg, ".".join(path)) if path else cfg
+        t = get_type_hints(type(owner)).get(_ALIASES.get(last, last))
+        args = get_args(t) if get_origin(t) in (list, typing.List) else ()
+        if args and dataclasses.is_dataclass(args[0]):
+            elem = args[0]()
+            out.extend((f"{key}[].{k}", to_dict(get_key(elem, k))) for k in all_keys(args[0]))
+    return out
+
+
+def get_key(cfg: Any, key: str) -> Any:
+    """The value of a dotted key (``lighting.lights[0].angle`` reads one element)."""
     obj: Any = cfg
     for p in key.split("."):
+        m = re.match(r"^(\w+)\[(\d+)\]$", p)
+        if m and dataclasses.is_dataclass(obj) and m.group(1) in _fields(type(obj)):
+            items = getattr(obj, m.group(1))
+            if not isinstance(items, list) or int(m.group(2)) >= len(items):
+                raise ConfigError(f"no element {m.group(2)} (there are {len(items)})", key=key)
+            obj = items[int(m.group(2))]
+            continue
         attr = _ALIASES.get(p, p)
         if not dataclasses.is_dataclass(obj) or attr not in _fields(type(obj)):
             raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
@@ -614,7 +874,7 @@ def validate(cfg: Config) -> None:
     """Range checks that types alone cannot express."""
     def need(cond: bool, key: str, msg: str) -> None:
         if not cond:
-            raise ConfigError(msg, path=cfg.source, key=key)
+            raise error_at(cfg, key, msg)
 
     need(cfg.transform.scale > 0, "transform.scale", "must be > 0")
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
@@ -650,6 +910,9 @@ def validate(cfg: Config) -> None:
     need(cfg.bsp.ensemble_max >= 0, "bsp.ensemble_max", "must be >= 0")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
+    sb3_name = cfg.export.sb3_name
+    need(not sb3_name or (Path(sb3_name).name == sb3_name and sb3_name not in (".", "..")), "export.sb3_name",
+         "must be a file name, not a path")
     for i, lt in enumerate(cfg.lighting.lights):
         need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
         need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")
@@ -685,5 +948,5 @@ def numeric_keys() -> list[str]:
     return out
 
 
-__all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "to_dict", "numeric_keys",
-           "parse_value", "Optional"]
+__all__ = ["Config", "load", "apply_override", "get_key", "all_keys", "key_defaults", "to_dict", "numeric_keys",
+           "parse_value", "origin", "error_at", "PATH_KEYS", "Optional"]

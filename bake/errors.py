@@ -5,7 +5,7 @@ Exit statuses (documented in README.md):
   1  internal error (a bug; rerun with --debug for the traceback)
   2  bad command line or config (unknown key, wrong type, bad value)
   3  bad input file (unreadable, malformed, out of range, NaN/Inf, unsafe archive)
-  4  a Scratch limit was exceeded under --strict
+  4  under --strict: a Scratch limit was exceeded, or the report lists a problem (all-black lighting)
   5  a stage failed on valid input (e.g. an external tool crashed or timed out)
 """
 

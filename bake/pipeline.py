@@ -15,6 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from . import advice
 from . import config as config_mod
 from .config import Config, ImportJob
 from .errors import BakeError, ConfigError, InputError, StageError
@@ -44,6 +45,14 @@ def _import_job(cfg: Config) -> ImportJob:
                      scene=cfg.import_.scene)
 
 
+def _textures_section(cfg: Config):
+    """The textures section, told whether the lighting stage will bake into its lightmap atlas."""
+    import dataclasses
+
+    lit = cfg.lighting.enabled and cfg.lighting.target == "lightmap"
+    return dataclasses.replace(cfg.textures, lightmap=dataclasses.replace(cfg.textures.lightmap, lit=lit))
+
+
 def _always(_: Config) -> bool:
     return True
 
@@ -56,7 +65,7 @@ STAGES: tuple[StageSpec, ...] = (
               lambda c: c.mesh.clean.enabled, "mesh.clean.enabled"),
     StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify,
               lambda c: c.mesh.simplify.enabled, "mesh.simplify.enabled"),
-    StageSpec("textures", "bake.textures.stage:stage", lambda c: c.textures,
+    StageSpec("textures", "bake.textures.stage:stage", _textures_section,
               lambda c: c.textures.enabled, "textures.enabled"),
     StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting,
               lambda c: c.lighting.enabled, "lighting.enabled"),
@@ -147,6 +156,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             rec.counts_in = counts_in
         if not rec.counts_out:
             rec.counts_out = counts(scene)
+        advice.after_stage(spec.name, cfg, scene, rec, records)
         records.append(rec)
         if observe is not None:
             observe(spec.name, scene)
@@ -159,15 +169,11 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:
-    """A stage's range check names the key; add the config file and the key's line in it."""
-    if e.path is not None or cfg.source is None or e.key is None:
+    """A stage's range check names the key; add where its value came from (the config file and
+    the key's line, or the --set on the command line)."""
+    if e.path is not None or e.key is None:
         return e
-    try:
-        text = cfg.source.read_text("utf-8")
-    except (OSError, UnicodeDecodeError):
-        text = None
-    return ConfigError(e.message, path=cfg.source, line=config_mod._Where(text, cfg.source).line_of(e.key),
-                       key=e.key)
+    return config_mod.error_at(cfg, e.key, e.message)
 
 
 def check_coordinates(scene: Scene, stage: str, cfg: Config) -> None:
@@ -209,6 +215,10 @@ def load_config_for(target: str | Path, overrides: list[str] | None = None) -> C
                               key="input.path")
         return cfg
     cfg = config_mod.load(None, overrides)
+    given = config_mod.origin(cfg, "input.path")
+    if given is not None:
+        raise ConfigError(f"{given} names a model, and so does the command line ({p}); give one model, or "
+                          "a config whose input.path names it", key="input.path")
     cfg.input.path = str(p.resolve())
     cfg.base_dir = Path.cwd()
     return cfg

@@ -15,6 +15,8 @@ class StageRecord:
     ``effects`` lists effects this stage ran or skipped: dicts with ``name``, ``ran`` (bool),
     ``reason`` and optional ``rays``/``seconds``/``error``.
     ``details`` holds anything else worth keeping in report.json (JSON-serialisable).
+    ``problems`` are warnings (also in ``warnings``) that make the bake a failure under
+    ``--strict`` / ``report.strict`` (exit status 4), e.g. a lit bake whose colours are all black.
     """
 
     name: str
@@ -25,6 +27,7 @@ class StageRecord:
     warnings: list[str] = field(default_factory=list)
     effects: list[dict[str, Any]] = field(default_factory=list)
     details: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
 
     def warn(self, message: str) -> None:
         self.warnings.append(message)
@@ -39,6 +42,7 @@ class StageRecord:
             "warnings": list(self.warnings),
             "effects": list(self.effects),
             "details": self.details,
+            "problems": list(self.problems),
         }
 
 

@@ -12,6 +12,10 @@ in the BSP's order must agree) and for previews in the report::
     img.depth      # (H, W) view-space depth of that triangle at the pixel centre (inf: none)
     img.edge       # (H, W) distance in pixels from the pixel centre to that triangle's nearest edge
 
+The frame is the export's (x right, y up, z into the screen, left-handed): a point at +x of
+where the camera looks is drawn right of the centre, as a Scratch engine draws it.
+``Camera.yaw_pitch`` is the reader sprite's camera (screen ``focal * x / z``, stage 480 x 360).
+
 Conventions: a pixel is covered when its centre is inside the (near-clipped, projected) triangle,
 edges included. ``mode="zbuffer"`` keeps the nearest triangle (perspective-correct depth; exact
 ties go to the lower index); ``mode="painter"`` draws ``order`` in sequence, later triangles
@@ -36,9 +40,26 @@ class Camera:
     height: int = 256
     up: tuple[float, float, float] = (0.0, 1.0, 0.0)
     near: float = 1e-3  # near plane distance (world units)
+    focal_px: float | None = None  # focal length in pixels; None: from ``fov`` and ``height``
+
+    @classmethod
+    def yaw_pitch(cls, position, yaw: float, pitch: float, focal_px: float, *, width: int = 480,
+                  height: int = 360, near: float = 1e-3) -> "Camera":
+        """The camera of a Scratch engine that turns ``yaw`` degrees about y (positive turns right)
+        and then ``pitch`` degrees about its x axis (positive looks up), with the screen
+        ``focal_px * x / z`` pixels right of the centre: the reader sprite's camera
+        (bake/scratch/readers.py) on a ``width`` x ``height`` stage (|pitch| < 90)."""
+        sy, cy = np.sin(np.radians(yaw)), np.cos(np.radians(yaw))
+        sp, cp = np.sin(np.radians(pitch)), np.cos(np.radians(pitch))
+        e = np.asarray(position, np.float64)
+        f = np.array([sy * cp, sp, cy * cp])
+        return cls(tuple(float(x) for x in e), tuple(float(x) for x in e + f), width=width, height=height,
+                   near=near, focal_px=float(focal_px))
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(eye, right, up, forward) orthonormal camera frame."""
+        """(eye, right, up, forward) orthonormal camera frame in the documented left-handed frame
+        (x right, y up, z into the screen): a camera looking along +z with up +y has right = +x.
+        So right = up x forward (forward x up would be -x, a mirrored picture)."""
         e = np.asarray(self.position, np.float64)
         f = np.asarray(self.look_at, np.float64) - e
         nf = np.linalg.norm(f)
@@ -46,16 +67,18 @@ class Camera:
             raise ValueError("camera position and look_at coincide")
         f = f / nf
         up = np.asarray(self.up, np.float64)
-        r = np.cross(f, up)
+        r = np.cross(up, f)
         if np.linalg.norm(r) < 1e-9 * max(1.0, np.linalg.norm(up)):  # looking along up
             alt = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-            r = np.cross(f, alt)
+            r = np.cross(alt, f)
         r = r / np.linalg.norm(r)
-        u = np.cross(r, f)
+        u = np.cross(f, r)
         return e, r, u, f
 
     @property
     def focal(self) -> float:
+        if self.focal_px is not None:
+            return float(self.focal_px)
         return 0.5 * self.height / np.tan(np.radians(self.fov) / 2.0)
 
 

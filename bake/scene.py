@@ -96,6 +96,8 @@ class ScratchList:
 class SourceInfo:
     path: Path | None = None
     files_read: tuple[Path, ...] = ()  # every file an importer opened (for --depfile)
+    # files a model names that were not there (a texture, an .mtl): --depfile watches their folders
+    files_missing: tuple[Path, ...] = ()
     format: str = ""
 
 

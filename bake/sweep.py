@@ -35,7 +35,7 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -80,6 +80,7 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         raise ConfigError(f"--vary expects section.key=v1,v2,..., got {text!r}")
     key, vals = text.split("=", 1)
     key = key.strip()
+    config_mod.get_key(Config(), key)  # an unknown key is named as such, with a suggestion
     if key not in config_mod.numeric_keys():
         raise ConfigError("is not a numeric key (sweep varies ints and floats)", key=key)
     out: list[float] = []
@@ -254,7 +255,8 @@ def compare(run: dict, ref: dict) -> dict[str, Any]:
 
 
 def sweep(config: str | Path | Config, key: str, values: Sequence[float], reference: Any = None, *,
-          scene: Scene | None = None, out: str | Path | None = None) -> dict[str, Any]:
+          scene: Scene | None = None, out: str | Path | None = None,
+          progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Bake once per value of ``key`` and compare each bake with a reference.
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
@@ -267,9 +269,14 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     vals = sorted(dict.fromkeys(values), key=float)
     if not vals:
         raise ConfigError("sweep needs at least one value", key=key)
+    say = progress or (lambda _msg: None)
     if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
+        say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries)")
         _bake(_with_value(base, key, vals[0]), scene, key)
-    runs = {v: _bake(_with_value(base, key, v), scene, key) for v in vals}  # one bake per value
+    runs = {}
+    for i, v in enumerate(vals, 1):  # one bake per value
+        say(f"bake {i}/{len(vals)}: {key} = {v}")
+        runs[v] = _bake(_with_value(base, key, v), scene, key)
     ref_desc: dict[str, Any]
     ref_run: _Run | None = None
     if reference is None:
@@ -278,6 +285,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     elif isinstance(reference, Scene):
         ref_desc = {"kind": "scene"}
     else:
+        say(f"reference bake at {key} = {reference}")
         ref_run = _bake(_with_value(base, key, reference), scene, key)
         ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
                     "total_seconds": round(ref_run.total, 6)}
@@ -288,6 +296,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         from .export.preview import cameras
 
         cams = cameras(ref_mesh.verts, *PREVIEW_SIZE)
+    say("rendering previews and comparing with the reference")
     ref_images = _previews(ref_mesh, cams)
     rows = []
     for v in vals:
@@ -338,7 +347,8 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
 
 def summary_lines(table: dict) -> list[str]:
     """The sweep as a terminal table."""
-    lines = [f"sweep {table['key']} (reference: {table['reference']}); error = {table['error_metric']}",
+    lines = [f"sweep {table['key']}: reference = {reference_text(table['reference'])}",
+             f"  error = {table['error_metric']}",
              f"  {'value':>10} {'stage s':>9} {'total s':>9} {'error':>11} {'image err':>10} {'bytes':>10} "
              f"{'triangles':>10}"]
 
@@ -351,6 +361,18 @@ def summary_lines(table: dict) -> list[str]:
     if table.get("slope") is not None:
         lines.append(f"  log-log slope of the colour error against the value: {table['slope']:.2f}")
     return lines
+
+
+def reference_text(ref: dict) -> str:
+    """The reference of a sweep in words."""
+    kind = ref.get("kind")
+    if kind == "highest value":
+        return f"the bake at the highest value ({ref.get('value')})"
+    if kind == "reference run":
+        return f"an extra bake at {ref.get('value')} (not a row)"
+    if kind == "scene":
+        return "a lighting bake given by the caller"
+    return str(kind)
 
 
 def _slope(rows: list[dict]) -> float | None:
@@ -394,10 +416,24 @@ def _component(effect: str) -> str:
     return "direct" if effect.startswith("light[") else _COMPONENT_OF.get(effect, effect)
 
 
+def pareto_front(seconds: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Indices of the bakes no other bake beats on both time and error (the fastest bake for
+    each error reached), in order of seconds. Stage times are noisy, so joining the points in
+    the order of the swept value zig-zags back and forth along the seconds axis; the front is
+    the trade-off a reader looks for, and it runs left to right."""
+    seconds = np.asarray(seconds, float)
+    error = np.asarray(error, float)
+    order = np.lexsort((error, seconds))  # by seconds, then error
+    e = error[order]
+    best_before = np.minimum.accumulate(np.concatenate([[np.inf], e[:-1]]))
+    return order[e < best_before].astype(np.int64)
+
+
 def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
     """Three panels: the key's error against seconds, list bytes against seconds (each point
-    labelled with its value), and the errors against the value (for lighting keys each effect's
-    actual error next to the stage's own estimate, in the same units)."""
+    labelled with its value; against seconds only the Pareto front of error and seconds is
+    joined, in order of seconds), and the errors against the value (for lighting keys each
+    effect's actual error next to the stage's own estimate, in the same units)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -414,25 +450,34 @@ def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
         return np.isfinite(y) & (y > 0) & np.isfinite(xs), y
 
     def labelled(ax, xs, ys, ok, style, label):
-        ax.plot(xs[ok], ys[ok], style, label=label)
+        """Points labelled with their values; no line (against seconds the value order is not
+        the order along the axis)."""
+        line = ax.plot(xs[ok], ys[ok], style, linestyle="none", label=label)[0]
         for xi, yi, r in zip(xs[ok], ys[ok], [r for r, k in zip(rows, ok) if k]):
             ax.annotate(f"{r['value']:g}" if isinstance(r["value"], (int, float)) else str(r["value"]), (xi, yi),
                         textcoords="offset points", xytext=(4, 4), fontsize=7)
+        return line
+
+    def front(ax, xs, ys, ok, line):
+        f = pareto_front(xs[ok], ys[ok])
+        if len(f) > 1:
+            ax.plot(xs[ok][f], ys[ok][f], "-", color=line.get_color(), alpha=0.6,
+                    label=f"{line.get_label()}: fastest for its error")
 
     ok, y = series([r.get("error") for r in rows], secs)
     if ok.any():
-        labelled(ax1, secs, y, ok, "o-", table.get("error_key", "error"))
+        front(ax1, secs, y, ok, labelled(ax1, secs, y, ok, "o", table.get("error_key", "error")))
         if (y[ok] > 0).all() and y[ok].max() > 20 * y[ok].min():
             ax1.set_yscale("log")
     ok2, y2 = series([r.get("image_rmse") for r in rows], secs)
     if ok2.any() and table.get("error_key") != "image_rmse":
-        labelled(ax1, secs, y2, ok2, "s--", "image_rmse")
+        front(ax1, secs, y2, ok2, labelled(ax1, secs, y2, ok2, "s", "image_rmse"))
     ax1.set_xlabel(f"seconds ({'+'.join(table.get('stages') or ['stage'])})")
     ax1.set_ylabel("error")
     ax1.set_title(f"{table.get('error_metric', 'error')}", fontsize=9)
     ok, y = series([r.get("bytes") for r in rows], secs)
     if ok.any():
-        labelled(ax2, secs, y, ok, "o-", "list bytes in project.json")
+        labelled(ax2, secs, y, ok, "o", "list bytes in project.json")
     ax2.set_xlabel("seconds")
     ax2.set_ylabel("bytes")
     ax2.set_title("what it costs in project.json", fontsize=9)

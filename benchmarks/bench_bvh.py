@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bake.bvh import build as B  # noqa: E402
-from bake.bvh.encode import encode, sizes  # noqa: E402
+from bake.bvh.encode import encode, outward, sizes  # noqa: E402
 from bake.bvh.stage import prepare  # noqa: E402
 from bake.bvh.traverse import brute_force, trace  # noqa: E402
 from bake.bvh.verify import compare_embree, make_rays  # noqa: E402
@@ -83,11 +83,13 @@ def model_figures(name, scene, a) -> dict:
             if q == "high" and a.quick:
                 continue
             bvh, w, c = timed(lambda: B.build(lo, hi, leaf_size=4, bins=8, quality=q,
-                                              high_seconds=a.high_seconds, ids=keep))
+                                              high_effort=a.high_effort, ids=keep))
             if q not in best or w < best[q][1]:
                 best[q] = (bvh, w, c)
     for q, (bvh, w, c) in best.items():
-        res[q] = {"sah": B.sah_cost(bvh), "nodes": bvh.n_nodes, "leaves": bvh.n_leaves,
+        wlo, whi = outward(bvh.lo, bvh.hi, d, pad)
+        res[q] = {"sah": B.sah_cost(bvh), "sah_written": B.sah_cost(bvh, lo=wlo, hi=whi),
+                  "nodes": bvh.n_nodes, "leaves": bvh.n_leaves,
                   "depth": bvh.depth(), "build_wall_s": w, "build_cpu_s": c,
                   "info": {k: v for k, v in bvh.info.items() if isinstance(v, (int, float, str))}}
     if "high" in res:
@@ -104,7 +106,8 @@ def model_figures(name, scene, a) -> dict:
         res[lay] = {**sizes(enc), "encode_s": w, "trace_s": tw,
                     "reads_per_ray": float(h.reads.mean()), "reads_p99": float(np.percentile(h.reads, 99)),
                     "boxes_per_ray": float(h.boxes.mean()), "tri_tests_per_ray": float(h.tests.mean()),
-                    "hit_rate": float(h.hit.mean())}
+                    "hit_rate": float(h.hit.mean()), "record_depth": enc.info.get("record_depth"),
+                    "stack_max": int(h.stack.max()) if lay != "binary" and len(h.stack) else 0}
     t0 = ts["binary"].t
     res["layouts_identical_t"] = all(np.array_equal(t0, ts[k].t) for k in LAYOUTS)
     res["quantised_misses_float_hit"] = int((np.isfinite(ts["wide4"].t) & ~np.isfinite(ts["quantised"].t)).sum())
@@ -161,7 +164,7 @@ def main() -> None:
     ap.add_argument("--sweep-rays", type=int, default=20_000)
     ap.add_argument("--brute-pairs", type=float, default=6e8)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--high-seconds", type=float, default=20.0)
+    ap.add_argument("--high-effort", type=float, default=10.0)
     ap.add_argument("--quick", action="store_true", help="no high-quality builds, no sweeps")
     ap.add_argument("--only", nargs="*", help="model names")
     a = ap.parse_args()

@@ -100,6 +100,27 @@ def test_strict_limit_exit_4_still_writes_report(tmp_path, capsys):
     assert code == 0  # without --strict an exceeded limit is a warning in the report
 
 
+def test_all_black_lit_bake_warns_and_strict_exits_4(tmp_path, capsys):
+    """Issue 17, item 1: a lit bake with nothing lighting the scene says so in the summary and
+    the report, and --strict fails it with exit status 4 (outputs still written)."""
+    model = grid_obj(tmp_path / "grid.obj", 3)
+    args = ["run", str(model), "--out", str(tmp_path / "o"), "--set", "lighting.enabled=true"]
+    code, out, err = run(args, capsys)
+    assert code == 0, err
+    assert "PROBLEM: every lit colour is black: no light source" in out
+    assert "1 PROBLEM(S) (--strict fails the bake)" in out
+    rep = json.loads((tmp_path / "o/report.json").read_text())
+    assert rep["problems"] == [{"stage": "lighting", "message": rep["problems"][0]["message"]}]
+    names = {e["name"]: e for e in rep["effects"]}
+    assert not names["lighting.light sources"]["ran"] and names["lighting.all black"]["ran"]
+    assert set(json.loads((tmp_path / "o/lists.json").read_text())["lists"]["tri colors"]) == {0}
+    code, out, err = run(args + ["--strict"], capsys)
+    assert code == 4 and "problem(s) under --strict" in err and "every lit colour is black" in err
+    assert (tmp_path / "o/report.json").exists()
+    code, out, err = run(args + ["--strict", "--set", "lighting.ambient=[0.5, 0.5, 0.5]"], capsys)
+    assert code == 0 and "PROBLEM" not in out, err
+
+
 def test_inspect(tmp_path, capsys):
     model = grid_obj(tmp_path / "grid.obj", 3)
     code, out, err = run(["inspect", str(model), "--json"], capsys)
@@ -152,3 +173,135 @@ def test_sweep_command_writes_table_and_plot(tmp_path, capsys):
     assert "alt='sweep lighting.ao.samples'" in page  # the bake's report shows the sweep
     code, _, err = run(["sweep", str(model), "--vary", "bsp.enabled=1,2"], capsys)
     assert code == 2 and "numeric" in err
+
+
+# --------------------------------------------------------------------------- output paths (issue 18, item 5)
+def bake_subprocess(args, cwd=None, prefix=()):
+    return subprocess.run([*prefix, sys.executable, "-m", "bake.cli", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+def one_error_line(r, status, *names):
+    assert r.returncode == status, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("bake: error: ")
+    for n in names:
+        assert str(n) in r.stderr, (n, r.stderr)
+    return r.stderr
+
+
+def test_output_path_mistakes_exit_2_naming_the_path_before_baking(tmp_path):
+    model = grid_obj(tmp_path / "grid.obj", 2)
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    r = bake_subprocess(["run", model, "--out", afile])
+    assert "names a file, not a folder" in one_error_line(r, 2, afile)
+    r = bake_subprocess(["run", model, "--out", afile / "sub"])
+    assert "is a file, not a folder" in one_error_line(r, 2, afile)
+    assert afile.read_text() == "mine"
+    folder = tmp_path / "adir"
+    folder.mkdir()
+    out = tmp_path / "o"
+    r = bake_subprocess(["run", model, "--out", out, "--depfile", folder])
+    assert "--depfile names a folder" in one_error_line(r, 2, folder)
+    assert not out.exists(), "the bake ran although its depfile could not be written"
+    # a depfile that would overwrite the model
+    r = bake_subprocess(["run", model, "--out", out, "--depfile", model])
+    one_error_line(r, 2, model)
+    assert not out.exists() and model.read_text().startswith("mtllib")
+
+
+def test_refusing_to_overwrite_an_input_exits_2_and_leaves_nothing(tmp_path):
+    model = grid_obj(tmp_path / "grid.obj", 2)
+    out = tmp_path / "o"
+    assert bake_subprocess(["run", model, "--out", out, "--quiet"]).returncode == 0
+    # bake into the .sb3 this very bake writes: known before the bake
+    r = bake_subprocess(["run", model, "--out", out, "--set", f'export.into="{out / "grid.sb3"}"'])
+    assert "refusing to overwrite the input file" in one_error_line(r, 2, out / "grid.sb3")
+    # a texture where the bake writes its costume: found by the importer, refused before anything is written
+    tex = tmp_path / "m" / "assets" / "tex_paint.png"
+    tex.parent.mkdir(parents=True)
+    from PIL import Image
+    Image.fromarray(np.full((2, 2, 3), 90, np.uint8)).save(tex)
+    obj = (tmp_path / "m" / "m.obj")
+    obj.write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl paint\nf 1/1 2/2 3/3\n")
+    (tmp_path / "m" / "m.mtl").write_text("newmtl paint\nKd 1 1 1\nmap_Kd assets/tex_paint.png\n")
+    before = sorted(p.name for p in (tmp_path / "m").rglob("*"))
+    r = bake_subprocess(["run", obj, "--out", tmp_path / "m", "--set", "textures.enabled=true"])
+    assert "refusing to overwrite the input file" in one_error_line(r, 2, tex)
+    assert sorted(p.name for p in (tmp_path / "m").rglob("*")) == before, "something was written (lists/?)"
+
+
+def _read_only_mount_prefix(folder):
+    """``unshare -m`` + a read-only bind mount of ``folder``: a real EROFS even for root."""
+    import shutil
+    if shutil.which("unshare") is None:
+        pytest.skip("unshare is not installed")
+    probe = subprocess.run(["unshare", "-m", "sh", "-c", f"mount --bind -o ro '{folder}' '{folder}'"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        pytest.skip(f"cannot make a read-only mount here: {probe.stderr.strip()}")
+    return ["unshare", "-m", "sh", "-c", f"mount --bind -o ro '{folder}' '{folder}' && exec \"$0\" \"$@\""]
+
+
+def test_read_only_output_folder_exits_2_naming_the_folder(tmp_path):
+    model = grid_obj(tmp_path / "grid.obj", 2)
+    out = tmp_path / "ro"
+    out.mkdir()
+    prefix = _read_only_mount_prefix(out)
+    r = bake_subprocess(["run", model, "--out", out], prefix=prefix)
+    assert "read-only" in one_error_line(r, 2, out)
+    r = bake_subprocess(["run", model, "--out", out / "sub"], prefix=prefix)
+    assert "read-only" in one_error_line(r, 2, out)
+
+
+# --------------------------------------------------------------------------- bake sweep (issue 18, item 8)
+def test_sweep_shows_progress_as_it_goes_and_a_readable_header(tmp_path):
+    import time as _time
+    model = grid_obj(tmp_path / "grid.obj", 12)
+    proc = subprocess.Popen([sys.executable, "-m", "bake.cli", "sweep", str(model), "--vary",
+                             "export.precision=2,3,4", "--out", str(tmp_path / "o")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = _time.perf_counter()
+    arrivals = []
+    for line in proc.stderr:  # read as the lines come
+        arrivals.append((_time.perf_counter() - t0, line.rstrip("\n")))
+    out = proc.stdout.read()
+    proc.wait(timeout=300)
+    end = _time.perf_counter() - t0
+    assert proc.returncode == 0, arrivals
+    msgs = [m for _, m in arrivals]
+    bakes = [m for m in msgs if "bake " in m and "/3:" in m]
+    assert [b.split("] ", 1)[1] for b in bakes] == [f"bake {i}/3: export.precision = {v}"
+                                                   for i, v in ((1, 2), (2, 3), (3, 4))], msgs
+    assert any("warm-up" in m for m in msgs) and any("comparing" in m for m in msgs), msgs
+    assert arrivals[0][0] < end / 2, (arrivals, end)  # the first line came early, not at the end
+    header = out.splitlines()[0]
+    assert header == "sweep export.precision: reference = the bake at the highest value (4)", header
+    assert "{" not in out, out
+    # --quiet: nothing on stderr
+    r = subprocess.run([sys.executable, "-m", "bake.cli", "sweep", str(model), "--vary", "export.precision=2,3",
+                        "--out", str(tmp_path / "o"), "--quiet"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stderr == "" and r.stdout == "", (r.stdout, r.stderr)
+
+
+# --------------------------------------------------------------------------- README (issue 18, item 9)
+def test_readme_worked_example_is_what_a_run_prints(tmp_path):
+    """README's Suzanne example, run for real: the same lines but for the times."""
+    import re
+    from pathlib import Path
+
+    from conftest import corpus_path
+
+    model = corpus_path("suzanne_obj", "suzanne.obj")
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    cmd = re.search(r"```sh\n\.venv/bin/bake (run \S+suzanne\.obj --out (\S+))\n```", readme)
+    shown = re.search(r"```\n(suzanne\.obj: .*?)```", readme, re.S).group(1)
+    assert cmd, "the example's command is not in README.md"
+    r = subprocess.run([sys.executable, "-m", "bake.cli", "run", str(model), "--out", cmd.group(2)],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr
+
+    def masked(text):
+        return [re.sub(r"\d+\.\d+ s\b", "# s", ln) for ln in text.strip().splitlines()]
+    assert masked(r.stdout) == masked(shown)

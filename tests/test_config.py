@@ -30,7 +30,7 @@ def test_unknown_key_names_file_line_and_suggestion(tmp_path):
 
 def test_unknown_section_suggests(tmp_path):
     p = write(tmp_path, "[lightning]\nenabled = true\n")
-    with pytest.raises(ConfigError, match="did you mean 'lighting"):
+    with pytest.raises(ConfigError, match=r"unknown table \[lightning\]; did you mean \[lighting\]\?"):
         config.load(p)
 
 
@@ -97,3 +97,56 @@ def test_numeric_keys_cover_sweepable_settings():
     keys = config.numeric_keys()
     assert "lighting.ao.samples" in keys and "bsp.candidates" in keys and "bvh.bins" in keys
     assert "bsp.enabled" not in keys
+
+
+LIGHTS_TOML = """[lighting]
+enabled = true
+
+[[lighting.lights]]
+kind = "sun"
+angle = 2.0
+
+[[lighting.lights]]
+kind = "point"
+{field} = {value}
+position = [0, 1, 0]
+"""
+
+
+def test_light_fields_are_checked_like_any_key_naming_the_line(tmp_path):
+    """Issue 17, item 7: a typo inside the second [[lighting.lights]] names its line and
+    suggests the light field, not 'lighting.lights'."""
+    with pytest.raises(ConfigError) as e:
+        config.load(write(tmp_path, LIGHTS_TOML.format(field="angel", value="3.0")))
+    assert e.value.line == 10 and e.value.key == "lighting.lights[1].angel"
+    assert "did you mean 'angle'?" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(ConfigError, match="did you mean 'intensity'") as e:
+        config.load(write(tmp_path, LIGHTS_TOML.format(field="angle", value="3").replace("angle = 2.0", "intensty = 2")))
+    assert e.value.line == 6 and e.value.key == "lighting.lights[0].intensty"
+    # range / shape checks name the field's line in the right block too
+    with pytest.raises(ConfigError, match=r"must be \[r, g, b\]") as e:
+        config.load(write(tmp_path, LIGHTS_TOML.format(field="color", value="[1, 1]")))
+    assert e.value.line == 10 and e.value.key == "lighting.lights[1].color"
+    cfg = config.load(write(tmp_path, LIGHTS_TOML.format(field="angle", value="3.0")))
+    assert [lt.angle for lt in cfg.lighting.lights] == [2.0, 3.0]
+
+
+def test_light_fields_by_set_and_in_bake_keys(capsys):
+    cfg = config.load(None, ["lighting.lights[0].intensity=2", "lighting.lights[0].kind=\"point\"",
+                             "lighting.lights[1].angle=4"])
+    assert [(lt.kind, lt.intensity, lt.angle) for lt in cfg.lighting.lights] == [("point", 2.0, 0.53),
+                                                                                ("sun", 1.0, 4.0)]
+    assert config.get_key(cfg, "lighting.lights[1].angle") == 4.0
+    with pytest.raises(ConfigError, match="did you mean 'angle'"):
+        config.load(None, ["lighting.lights[0].anlge=3"])
+    with pytest.raises(ConfigError, match=r"\[0\] adds one"):
+        config.load(None, ["lighting.lights[3].angle=3"])
+    with pytest.raises(ConfigError, match="expected a number"):
+        config.load(None, ["lighting.lights[0].angle=\"wide\""])
+    from bake import cli
+
+    assert cli.main(["keys"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    want = {f"lighting.lights[].{k}" for k in config.all_keys(config.LightConfig)}
+    assert len(want) == 11 and want <= {ln.split(" = ")[0] for ln in lines}
+    assert 'lighting.lights[].angle = 0.53' in lines and 'lighting.lights[].kind = "sun"' in lines

@@ -50,10 +50,11 @@ def test_perspective_correct_depth_on_a_tilted_plane():
     H = W = 64
     f = CAM.focal
     ys, xs = np.nonzero(img.covered)
-    # ray through the pixel centre: direction (x', y', -1) with x' = (px + .5 - W/2) / f
+    # ray through the pixel centre: screen x' = (px + .5 - W/2) / f; looking along -z in the
+    # left-handed frame (x right when looking along +z) the screen's right is world -x
     xr = (xs + 0.5 - W / 2) / f
-    # depth z along the view axis solves z = 2 + 0.5 * x, x = xr * z  ->  z = 2 / (1 - 0.5 xr)
-    expect = 2.0 / (1.0 - 0.5 * xr)
+    # depth z along the view axis solves z = 2 + 0.5 * x, x = -xr * z  ->  z = 2 / (1 + 0.5 xr)
+    expect = 2.0 / (1.0 + 0.5 * xr)
     np.testing.assert_allclose(img.depth[ys, xs], expect, rtol=1e-9)
     assert H == CAM.height
 
@@ -135,3 +136,82 @@ def test_render_scene_uses_albedo_sidedness_and_order():
     assert tuple(p.image[32, 32]) == (0.0, 1.0, 0.0)
     shaded = render_scene(s, CAM, shade=True)
     assert 0.9 < shaded.image[32, 32, 0] <= 1.0  # facing the camera: nearly full colour
+
+
+# --------------------------------------------------------------------------- the frame: no mirror
+def _arrow():
+    """An asymmetric model: a big triangle pointing to +x (its tip at x = 3) and a small one
+    above it, at z = 0, both facing a camera in front (at -z, looking along +z)."""
+    tip = np.array([[[-1.0, -1.0, 0.0], [-1.0, 1.0, 0.0], [3.0, 0.0, 0.0]],
+                    [[-0.5, 1.5, 0.0], [-0.5, 2.5, 0.0], [0.5, 1.5, 0.0]]])
+    n = np.cross(tip[:, 1] - tip[:, 0], tip[:, 2] - tip[:, 0])
+    assert (n[:, 2] < 0).all()  # fronts face -z: towards the camera
+    return tip
+
+
+def test_plus_x_is_drawn_right_and_plus_y_up_as_in_a_scratch_engine():
+    """The documented frame (x right, y up, z into the screen): a camera in front of the model
+    looking along +z draws the point (3, 0, 0) right of the centre, (0, 2, 0) above it. A
+    mirrored camera (right = forward x up) puts the tip on the left and fails this."""
+    cam = Camera(position=(0, 0, -10), look_at=(0, 0, 0), fov=40, width=200, height=150)
+    img = render(cam, _arrow())
+    f = cam.focal
+    # the pixel of a known point: the tip at (3, 0, 0), one pixel inside it; the small triangle
+    col = int(np.floor(100 + f * 2.9 / 10))
+    row = int(np.floor(75 - f * 0.0 / 10))
+    assert img.tri_id[row, col] == 0, "the tip of the arrow (+x) is not right of the centre"
+    assert not img.covered[row, 200 - 1 - col]
+    row_up = int(np.floor(75 - f * 1.8 / 10))
+    assert img.tri_id[row_up, int(np.floor(100 + f * -0.3 / 10))] == 1, "+y is not up"
+    cols = np.flatnonzero(img.covered.any(0))
+    assert cols.max() - 100 > 100 - cols.min()  # the long side of the arrow is on the right
+
+
+def test_camera_basis_is_left_handed():
+    eye, r, u, f = Camera((0, 0, -5), (0, 0, 0)).basis()
+    np.testing.assert_allclose(r, [1, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(u, [0, 1, 0], atol=1e-15)
+    # (right, up, forward) is oriented as (x, y, z): the view frame is the world's own frame turned
+    np.testing.assert_allclose(np.cross(r, u), f, atol=1e-15)
+    # from behind (looking along -z) +x is on the left
+    _, r2, _, _ = Camera((0, 0, 5), (0, 0, 0)).basis()
+    np.testing.assert_allclose(r2, [-1, 0, 0], atol=1e-15)
+
+
+def test_the_reader_sprites_camera_model_gives_the_same_pixels():
+    """``Camera.yaw_pitch`` is the reader sprite's projection (bake/scratch/readers.py
+    ``project``, the arithmetic of its blocks): every vertex of a random model lands on the same
+    stage pixel in both, and the triangle the render shows at a triangle's centroid pixel is that
+    triangle, for cameras turned every way."""
+    from bake.scratch import readers
+
+    rng = np.random.default_rng(7)
+    pts = rng.normal(size=(40, 3))
+    for yaw, pitch in ((0.0, 0.0), (30.0, -20.0), (-125.5, 35.25), (170.0, 10.0)):
+        cam = readers.Camera(x=1.0, y=0.5, z=-2.0, yaw=yaw, pitch=pitch, focal=300.0, near=0.01)
+        sy, cy = np.sin(np.radians(yaw)), np.cos(np.radians(yaw))
+        sp, cp = np.sin(np.radians(pitch)), np.cos(np.radians(pitch))
+        fwd = np.array([sy * cp, sp, cy * cp])
+        world = np.array([cam.x, cam.y, cam.z]) + 8.0 * fwd + pts  # in front of the camera
+        px, py, pz = readers.project(world, cam)
+        rc = Camera.yaw_pitch((cam.x, cam.y, cam.z), yaw, pitch, cam.focal, near=cam.near)
+        eye, r, u, f = rc.basis()
+        rel = world - eye
+        sx = rel @ r / (rel @ f) * rc.focal + 240.0  # render.py's screen position
+        sy_ = 180.0 - rel @ u / (rel @ f) * rc.focal
+        np.testing.assert_allclose(sx - 240.0, px, atol=1e-6)
+        np.testing.assert_allclose(180.0 - sy_, py, atol=1e-6)
+        np.testing.assert_allclose(rel @ f, pz, rtol=1e-9)
+        # one small triangle around each point: seen at the point's pixel
+        tri = world[:, None, :] + np.array([[-0.05, -0.05, 0], [0.0, 0.07, 0], [0.05, -0.05, 0]]) @ \
+            np.stack([r, u, f])
+        img = render(rc, tri, cull=False)
+        col = np.floor(px + 240.0).astype(int)
+        row = np.floor(180.0 - py).astype(int)
+        ok = (col >= 0) & (col < 480) & (row >= 0) & (row < 360)
+        assert ok.sum() > 20
+        seen = img.tri_id[row[ok], col[ok]]
+        assert (seen >= 0).all()
+        # where triangles overlap the nearer one shows: it must be within a few px
+        own = seen == np.flatnonzero(ok)
+        assert own.mean() > 0.7

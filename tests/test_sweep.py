@@ -170,3 +170,47 @@ def test_sweep_lighting_key_compares_colours_before_the_bsp_splits(tmp_path):
     rows = table["rows"]
     assert rows[0]["rmse"] > rows[1]["rmse"] > rows[2]["rmse"] == 0.0
     assert all(r["bytes"] > 0 and "bsp" in r["stage_seconds"] for r in rows)
+
+
+def _plotted(table, monkeypatch):
+    """The figure ``plot`` draws (captured when it closes it)."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    from bake.sweep import plot
+
+    figs = []
+    real_close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: figs.append(fig) or real_close(fig))
+    plot(table, io.BytesIO())
+    return figs[-1]
+
+
+def test_sweep_plot_does_not_join_points_in_value_order_against_seconds(monkeypatch):
+    """Noisy stage times must not zig-zag the error-against-seconds line (issue 17, item 9):
+    every line drawn against seconds runs left to right, and joins only bakes no other bake
+    beats on both time and error; every bake is still a point."""
+    secs = [0.50, 0.31, 0.90, 0.62, 2.10]  # value order: 16 is slower than 32, 128 than 256
+    err = [0.080, 0.052, 0.030, 0.021, 0.010]
+    rows = [{"value": v, "seconds": s, "total_seconds": s + 1, "error": e, "image_rmse": e / 2,
+             "bytes": 1000 + i, "reported_error": {}, "reference": False}
+            for i, (v, s, e) in enumerate(zip([16, 32, 64, 128, 256], secs, err))]
+    table = {"key": "bsp.candidates", "rows": rows, "stages": ["bsp"], "error_key": "inflation",
+             "error_metric": "split inflation", "reference": {"kind": "highest value"}}
+    fig = _plotted(table, monkeypatch)
+    for ax in fig.axes[:2]:  # the panels against seconds
+        points = 0
+        for ln in ax.get_lines():
+            xs = np.asarray(ln.get_xdata(), float)
+            if ln.get_linestyle() not in ("None", "none", "") and len(xs) > 1:
+                assert np.all(np.diff(xs) >= 0), f"a line against seconds goes back: {xs}"
+            if ln.get_marker() not in ("None", "none", "", None):
+                points = max(points, len(xs))
+        assert points == len(rows)
+    from bake.sweep import pareto_front
+
+    # the front: 32 (0.31 s) dominates 16 (0.50 s, worse error); 128 (0.62 s) dominates 64
+    assert pareto_front(np.array(secs), np.array(err)).tolist() == [1, 3, 4]
+    front = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "-"]
+    assert [list(ln.get_xdata()) for ln in front][0] == [0.31, 0.62, 2.10]

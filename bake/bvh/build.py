@@ -85,11 +85,13 @@ def half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0]
 
 
-def sah_cost(bvh: BVH, c_trav: float = 1.0, c_int: float = 1.0) -> float:
-    """The tinybvh SAH cost of the tree (see module doc). 0 for an empty tree."""
+def sah_cost(bvh: BVH, c_trav: float = 1.0, c_int: float = 1.0, *, lo: np.ndarray | None = None,
+             hi: np.ndarray | None = None) -> float:
+    """The tinybvh SAH cost of the tree (see module doc). 0 for an empty tree. ``lo``/``hi``
+    (N, 3) replace the node boxes (e.g. the boxes as the lists write them, rounded outward)."""
     if bvh.n_nodes == 0:
         return 0.0
-    a = half_area(bvh.lo, bvh.hi)
+    a = half_area(bvh.lo if lo is None else lo, bvh.hi if hi is None else hi)
     leaf = bvh.is_leaf
     root = a[0]
     total = c_trav * a[~leaf].sum() + c_int * (a[leaf] * bvh.count[leaf]).sum()
@@ -421,7 +423,7 @@ def collapse(bvh: BVH, leaf_size: int, c_trav: float = 1.0, c_int: float = 1.0) 
 
 
 # --------------------------------------------------------------------------- reinsertion
-def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: float = 30.0,
+def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget: float = 10e6,
                 c_trav: float = 1.0, mode: str = "children") -> BVH:
     """Insertion-based optimisation (after Bittner, Hapala & Havran 2013).
 
@@ -431,8 +433,11 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
     raise the interior surface area least (an exact branch-and-bound search over the whole
     tree). A move that does not lower the SAH cost is undone, so the cost never rises. Leaves are
     kept as they are. ``mode="subtree"`` instead moves whole subtrees (leaves too), largest
-    first; on the teapot it bought ~0.5% more for 10x the time, so ``build`` does not use it. A Python loop per move (nodes, never triangles); ``budget_s`` bounds the
-    time.
+    first; on the teapot it bought ~0.5% more for 10x the time, so ``build`` does not use it. A Python loop per move (nodes, never triangles).
+
+    ``budget`` bounds the work: the number of nodes the placement searches and refits may visit in all. It is
+    a count, not a time, so the same tree comes out on a busy machine and a quiet one (a time limit
+    made bakes differ under load); ``info["reinsertion_visits"]`` says how many were used.
     """
     import heapq
     import math
@@ -440,7 +445,7 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
 
     if bvh.n_nodes < 5:
         return bvh
-    t_end = time.perf_counter() + budget_s
+    work = {"visits": 0}
     L = bvh.left.tolist()
     Rg = bvh.right.tolist()
     P = bvh.parents().tolist()
@@ -470,6 +475,7 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
 
     def refit(i):
         while i >= 0:
+            work["visits"] += 1
             touch(i)
             a, b = L[i], Rg[i]
             la, lb, ha, hb = lo[a], lo[b], hi[a], hi[b]
@@ -517,6 +523,7 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
         heap = [(0.0, root)]
         while heap:
             ci, x = heapq.heappop(heap)
+            work["visits"] += 1
             if ci + an >= best_c:
                 break
             ux = union_area(x, blo, bhi)
@@ -550,7 +557,7 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
     moves = undone = 0
     inner = [i for i in range(len(L)) if L[i] >= 0]
     for _pass in range(passes):
-        if time.perf_counter() > t_end:
+        if work["visits"] > budget:
             break
         root = state["root"]
         cand = []
@@ -570,7 +577,7 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
         cand.sort()
         k = max(1, int(len(cand) * fraction))
         for _, i in cand[:k]:
-            if time.perf_counter() > t_end:
+            if work["visits"] > budget:
                 break
             root = state["root"]
             if mode == "subtree":
@@ -614,6 +621,8 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget_s: f
     out = preorder(out)
     out.info["reinsertions"] = moves
     out.info["reinsertions_undone"] = undone
+    out.info["reinsertion_visits"] = work["visits"]
+    out.info["reinsertion_budget_reached"] = work["visits"] > budget
     return out
 
 
@@ -633,14 +642,15 @@ def _reroot(bvh: BVH, r: int) -> BVH:
 
 # --------------------------------------------------------------------------- entry point
 def build(lo: np.ndarray, hi: np.ndarray, *, leaf_size: int = 4, bins: int = 8,
-          quality: str = "binned", high_seconds: float = 20.0, ids: np.ndarray | None = None,
+          quality: str = "binned", high_effort: float = 10.0, ids: np.ndarray | None = None,
           c_trav: float = 1.0, c_int: float = 1.0) -> BVH:
     """A depth-first (preorder) BVH over primitive boxes.
 
     ``binned``: :func:`build_binned` with ``bins`` bins (exact sweep for nodes of at most
     ``bins`` primitives). ``high``: at least 32 bins and an exact sweep up to 64 primitives,
-    built down to single-triangle leaves, improved by :func:`reinsertion` for at most
-    ``high_seconds``, then :func:`collapse` to leaves of at most ``leaf_size``.
+    built down to single-triangle leaves, improved by :func:`reinsertion` with a budget of
+    ``high_effort`` million node visits (a count, so the tree does not depend on the machine's
+    load), then :func:`collapse` to leaves of at most ``leaf_size``.
     """
     import time
 
@@ -650,7 +660,7 @@ def build(lo: np.ndarray, hi: np.ndarray, *, leaf_size: int = 4, bins: int = 8,
                          c_trav=c_trav, c_int=c_int)
         stages = {"start_sah": sah_cost(b, c_trav, c_int)}
         t1 = time.perf_counter()
-        b = reinsertion(b, passes=4, fraction=0.05, budget_s=max(0.0, high_seconds), c_trav=c_trav)
+        b = reinsertion(b, passes=4, fraction=0.05, budget=max(0.0, high_effort) * 1e6, c_trav=c_trav)
         stages["reinsertion_sah"] = sah_cost(b, c_trav, c_int)
         stages["reinsertion_seconds"] = time.perf_counter() - t1
         b = collapse(b, leaf_size, c_trav, c_int)

@@ -250,6 +250,19 @@ def widen(bvh: BVH, width: int = 4) -> Wide:
                 np.concatenate(slots) if slots else np.zeros(0, np.int64))
 
 
+def record_depth(bvh: BVH, w: Wide) -> int:
+    """Depth of the 4-wide tree in records (the root record 0): what bounds the walk's stack
+    (at most 3 x depth + 1 entries), not the binary tree's depth."""
+    depth = np.zeros(len(w.node), np.int64)
+    left = bvh.left
+    for r, (b, kids) in enumerate(zip(w.node, w.children)):  # parents come before children
+        n_inner = sum(1 for k in kids if left[k] >= 0 and k != b)
+        if n_inner:
+            base = w.child_base[r]
+            depth[base:base + n_inner] = depth[r] + 1
+    return int(depth.max()) if len(depth) else 0
+
+
 def _meta(bvh: BVH, kids: list[int], self_node: int) -> int:
     m = 0
     for j, k in enumerate(kids):
@@ -286,6 +299,7 @@ def encode_wide(bvh: BVH, tri: np.ndarray, tri_ids: np.ndarray, *, d: int | None
             rec[r, 3:3 + 6 * len(kids)] = kb.reshape(-1)
     else:
         info = _quantise_boxes(w, lo, hi, rec, bits)
+    info["record_depth"] = record_depth(bvh, w)
     nodes = np.concatenate([header, rec.reshape(-1)])
     enc = Encoded(layout, nodes, _tri_block(tri, w.slots), np.asarray(tri_ids, np.int64)[w.slots],
                   R, stride, header=WIDE_HEADER, bits=bits if quantised else 0, decimals=d,

@@ -18,7 +18,7 @@ from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from ..scratch.limits import LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
 from . import build as build_mod
-from .encode import MAX_LEAF, decimals_for, encode, round_nearest, sizes
+from .encode import MAX_LEAF, decimals_for, encode, outward, round_nearest, sizes
 from .traverse import BARY_HI, BARY_LO
 
 
@@ -32,7 +32,7 @@ def _check(cfg: BVHConfig) -> None:
     need(2 <= cfg.bins <= 256, "bins", "must be between 2 and 256")
     need(2 <= cfg.quant_bits <= 8, "quant_bits", "must be between 2 and 8")
     need(0 <= cfg.precision <= 15, "precision", "must be between 0 (exact) and 15")
-    need(cfg.high_seconds >= 0, "high_seconds", "must be >= 0")
+    need(cfg.high_effort >= 0, "high_effort", "must be >= 0")
     need(bool(cfg.list_prefix.strip()), "list_prefix", "must not be empty")
 
 
@@ -77,7 +77,7 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     hi = tq[keep].max(axis=1) if len(keep) else np.zeros((0, 3))
     tb = time.perf_counter()
     bvh = build_mod.build(lo, hi, leaf_size=cfg.leaf_size, bins=cfg.bins, quality=cfg.quality,
-                          high_seconds=cfg.high_seconds, ids=keep)
+                          high_effort=cfg.high_effort, ids=keep)
     build_s = time.perf_counter() - tb
     te = time.perf_counter()
     enc = encode(bvh, tq, np.arange(1, T + 1, dtype=np.int64), cfg.layout, d=d, pad=pad,
@@ -100,7 +100,12 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     # the reader sprite's inside test uses the reference's bounds (bake.scratch.readers.BVHSpec)
     scene = scene.with_artefact("bvh", {"tree": bvh, "encoded": enc, "bary": (BARY_LO, BARY_HI)})
 
-    sah = build_mod.sah_cost(bvh)
+    # the SAH of the tree as written: every box grown by the pad and rounded outward onto the
+    # list grid, exactly the boxes of the binary layout's records (the float boxes the 4-wide
+    # layouts are made from); the tight float64 boxes' figure is kept in the details
+    sah_tight = build_mod.sah_cost(bvh)
+    wlo, whi = outward(bvh.lo, bvh.hi, d, pad) if bvh.n_nodes else (bvh.lo, bvh.hi)
+    sah = build_mod.sah_cost(bvh, lo=wlo, hi=whi)
     rec.accuracy["sah_cost"] = sah
     rec.counts_out = {"triangles": T, "bvh_nodes": bvh.n_nodes, "bvh_leaves": bvh.n_leaves,
                       "bvh_records": enc.n_nodes, "bvh_slots": int(len(enc.ids)),
@@ -109,8 +114,12 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
         "layout": cfg.layout, "quality": cfg.quality, "leaf_size": cfg.leaf_size,
         "bins": cfg.bins, "quant_bits": cfg.quant_bits if cfg.layout == "quantised" else None,
         "decimals": d, "pad": pad, "depth": bvh.depth(), "sah_cost": sah,
+        "sah_cost_unrounded": sah_tight,
         "build_seconds": build_s, "encode_seconds": encode_s, "lists": names,
         "degenerate_dropped": dropped, "sizes": sz,
+        # 4-wide layouts: depth in records (root record 0), which bounds the walk's stack
+        "record_depth": enc.info.get("record_depth"),
+        "quantised_area_growth_mean": enc.info.get("area_growth_mean"),
         "build_info": {k: v for k, v in bvh.info.items() if isinstance(v, (int, float, str))},
     }
     for key, n in (("nodes", len(enc.nodes)), ("tris", len(enc.tris)), ("ids", len(enc.ids))):

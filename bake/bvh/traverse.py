@@ -56,6 +56,7 @@ class Hits:
     reads: np.ndarray  # (R,) int64 list items read
     boxes: np.ndarray | None = None  # (R,) box tests
     tests: np.ndarray | None = None  # (R,) triangle tests
+    stack: np.ndarray | None = None  # (R,) most stack entries held at once (4-wide layouts)
 
     @property
     def hit(self) -> np.ndarray:
@@ -260,6 +261,7 @@ class _Batch:
         self.reads = np.zeros(R, np.int64)
         self.boxes = np.zeros(R, np.int64)
         self.tests = np.zeros(R, np.int64)
+        self.stack = np.zeros(R, np.int64)
 
     def slab(self, idx, planes):
         """planes (n, 6) for rays idx -> (hit, tnear); identical arithmetic to ``_slab``."""
@@ -328,7 +330,7 @@ class _Batch:
         self.reads += hit
         t = np.where(hit, self.t, np.inf)
         return Hits(t, self.slot, tri, np.where(hit, self.u, 0.0), np.where(hit, self.v, 0.0),
-                    self.reads, self.boxes, self.tests)
+                    self.reads, self.boxes, self.tests, self.stack)
 
 
 def trace(enc: Encoded, origins, directions, tmin: float = 0.0, tmax: float = math.inf) -> Hits:
@@ -461,6 +463,7 @@ def _trace_wide(enc: Encoded, B: _Batch) -> None:
             ent[:, E - 1] = f_t[rr[ok], col[ok]]
             stack[w, sp[w]] = ent
             sp[w] += 1
+            B.stack[w] = np.maximum(B.stack[w], sp[w])
         # pop until an entry survives the tnear cull or the stack is empty
         p[cur] = 0
         pend = cur[sp[cur] > 0]

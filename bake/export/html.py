@@ -69,34 +69,47 @@ def bar_class(fraction: float) -> str:
 
 
 # --------------------------------------------------------------------------- reading the output folder
-def _load_json(path: Path) -> Any:
+def _read(out_dir: Path, rel: str, files: dict[str, bytes] | None) -> bytes | None:
+    """``out_dir/rel`` as the bake being written will leave it: from ``files`` (what is about to be
+    committed) when it is there, else from disk; None if neither has it."""
+    if files is not None and rel in files:
+        return files[rel]
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+        return (out_dir / rel).read_bytes()
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+        return None
+
+
+def _load_json(out_dir: Path, rel: str, files: dict[str, bytes] | None = None) -> Any:
+    path = out_dir / rel
+    data = _read(out_dir, rel, files)
+    if data is None:
         raise InputError("not found: is this a bake output folder? (bake run writes report.json and lists.json)",
-                         path=path) from None
+                         path=path)
+    try:
+        return json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(f"cannot be read as JSON: {e}", path=path) from None
 
 
-def _sb3_costumes(out_dir: Path, report: dict) -> dict[str, bytes]:
+def _sb3_costumes(out_dir: Path, report: dict, files: dict[str, bytes] | None = None) -> dict[str, bytes]:
     """Costume name -> image bytes from the .sb3 this bake wrote (if any)."""
     from ..scratch.sb3 import read_archive
 
     sb3s = sorted(k for k, v in report.get("outputs", {}).items() if k.endswith(".sb3") and v != "removed")
     out: dict[str, bytes] = {}
     for name in sb3s:
-        path = out_dir / name
-        if not path.is_file():
+        data = _read(out_dir, name, files)
+        if data is None:
             continue
-        files = read_archive(path)
+        entries = read_archive(data)
         try:
-            project = json.loads(files.get("project.json", b"{}"))
+            project = json.loads(entries.get("project.json", b"{}"))
         except json.JSONDecodeError:
             continue
         for target in project.get("targets", []):
             for c in target.get("costumes", []):
-                data = files.get(c.get("md5ext", ""))
+                data = entries.get(c.get("md5ext", ""))
                 if data is not None and c.get("name") not in out:
                     out[c["name"]] = data
         break
@@ -317,11 +330,64 @@ def load_sweeps(out_dir: Path) -> list[dict]:
     return out
 
 
-def _sweeps_section(sweeps: list[dict]) -> str:
+def sweep_hint(report: dict) -> str:
+    """A ``bake sweep`` command that works for this bake, run in its output folder: the bake's own
+    config or model (absolute paths), a key of a stage that ran (with values around the one used),
+    and ``--out .`` (so the page does not depend on where the folder is)."""
+    import shlex
+
+    cfg = report.get("config", {})
+    ran = {s.get("name") for s in report.get("stages", [])}
+    inp = report.get("input", {})
+    target = inp.get("config") or inp.get("path") or "MODEL"
+    from_config = bool(inp.get("config"))
+    sets: list[str] = []
+
+    def around(v: float, whole: bool) -> str:
+        vals = [v / 4, v / 2, v] + ([v * 2] if not whole or v * 2 <= 1e9 else [])
+        if not whole:
+            vals = [x for x in vals if x <= 1.0] if v <= 1.0 else vals
+            return ",".join(f"{x:.3g}" for x in vals)
+        return ",".join(str(max(1, int(round(x)))) for x in dict.fromkeys(vals))
+
+    simp = cfg.get("mesh", {}).get("simplify", {})
+    light = cfg.get("lighting", {})
+    if "simplify" in ran and simp.get("target_triangles", 0) > 0:
+        vary = f"mesh.simplify.target_triangles={around(simp['target_triangles'], True)}"
+    elif "simplify" in ran and simp.get("target_ratio", 0) > 0:
+        vary = f"mesh.simplify.target_ratio={around(simp['target_ratio'], False)}"
+    elif "simplify" in ran and simp.get("max_error", 0) > 0:
+        vary = f"mesh.simplify.max_error={around(simp['max_error'], False)}"
+    elif "lighting" in ran and light.get("ao", {}).get("enabled"):
+        vary = "lighting.ao.samples=16,64,256"
+    elif "lighting" in ran and light.get("lights"):
+        vary = "lighting.shadows.samples=1,4,16,64"
+    elif "bsp" in ran:
+        vary = "bsp.candidates=4,16,64"
+    elif "bvh" in ran:
+        vary = "bvh.leaf_size=1,2,4,8"
+    else:
+        vary = "export.precision=2,3,4,5"
+    if not from_config:  # a model baked with --set: switch the swept stage on again
+        stage_switch = {"mesh.simplify.": ["mesh.simplify.enabled=true"],
+                        "lighting.ao.": ["lighting.enabled=true", "lighting.ao.enabled=true"],
+                        "lighting.": ["lighting.enabled=true"], "bsp.": ["bsp.enabled=true"],
+                        "bvh.": ["bvh.enabled=true"]}
+        for prefix, sw in stage_switch.items():
+            if vary.startswith(prefix):
+                sets = sw
+                break
+    parts = ["bake", "sweep", str(target)] + [x for s in sets for x in ("--set", s)] + ["--vary", vary,
+                                                                                        "--out", "."]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def _sweeps_section(sweeps: list[dict], report: dict | None = None) -> str:
     if not sweeps:
-        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. Run for example <code>bake sweep "
-                "MODEL --vary mesh.simplify.target_ratio=0.02,0.1,0.5 --out THIS_FOLDER</code> "
-                "(any numeric key: <code>bake keys</code>) and the table and plot appear here.</p>")
+        cmd = sweep_hint(report or {})
+        return ("<h2>Accuracy against time</h2><p class=sub>No sweep yet. In this folder run for example "
+                f"<code>{_esc(cmd)}</code> (any numeric key of a stage that runs: <code>bake keys</code>) "
+                "and the table and plot appear here.</p>")
     parts = ["<h2>Accuracy against time</h2>"]
     for sw in sweeps:
         t = sw["table"]
@@ -343,17 +409,21 @@ def _sweeps_section(sweeps: list[dict]) -> str:
 
 
 # --------------------------------------------------------------------------- the page
-def build(out_dir: Path, *, width: int = 320, height: int = 240) -> tuple[str, dict[str, Any]]:
-    """The report page for a finished bake in ``out_dir`` and facts about what it shows."""
+def build(out_dir: Path, *, width: int = 320, height: int = 240,
+          files: dict[str, bytes] | None = None) -> tuple[str, dict[str, Any]]:
+    """The report page for a finished bake in ``out_dir`` and facts about what it shows.
+    ``files`` (relative path -> bytes): a bake's outputs not yet on disk, read instead of the
+    folder's (``bake run`` renders the page before it commits anything)."""
     from . import preview
 
     out_dir = Path(out_dir)
-    report = _load_json(out_dir / "report.json")
+    report = _load_json(out_dir, "report.json", files)
     cfg = report.get("config", {})
     json_name = cfg.get("export", {}).get("json_name", "lists.json")
-    lists_doc = _load_json(out_dir / json_name) if (out_dir / json_name).is_file() else {"lists": {}}
+    has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
+    lists_doc = _load_json(out_dir, json_name, files) if has_json else {"lists": {}}
     lists = lists_doc.get("lists", {})
-    costumes = _sb3_costumes(out_dir, report)
+    costumes = _sb3_costumes(out_dir, report, files)
     textures = decoded_textures(lists, report, costumes)
     lightmap = next((t for t in textures if t["name"] == "lightmap"), None)
     lm_img = None
@@ -379,11 +449,11 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240) -> tuple[str, d
     if views:
         body.append(_views_section(views, mesh))
     else:
-        why = (f"{json_name} was not written (export.json = false)" if not (out_dir / json_name).is_file() else
+        why = (f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
     body += [_textures_section(textures), _stages_section(report), _bsp_section(report), _lists_section(report),
-             _sweeps_section(sweeps)]
+             _sweeps_section(sweeps, report)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
             f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"
             f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "

@@ -8,6 +8,7 @@ list           stride  items
 verts          3       x, y, z of each vertex
 tris           4       v1, v2, v3 (1-based into verts), material (1-based into mat colors)
 mat colors     1       Scratch colour number of each material
+mat two-sided  1       1 if material m is two-sided, else 0 (when one is, or with a BSP tree)
 tri colors     1       colour number of each triangle (baked light, or material colour)
 vert colors    1       colour number of each vertex
 tri uvs        6       u1, v1, u2, v2, u3, v3 of each triangle (v up, 0..1 over the image)
@@ -37,10 +38,27 @@ from ..scratch.colors import scratch_numbers
 from ..scratch.numbers import (decimals_for, format_numbers, json_array, position_decimals, project_json_bytes,
                                render_items, round_positions)
 
-def list_file_name(name: str) -> str:
-    """A safe file name for a list (Scratch ignores the file name on import)."""
+# An item with one of these is split by Scratch's import of a .txt file (scratch-gui
+# src/lib/import-csv.js: a .txt whose first, middle and last lines split into the same number of
+# fields at a comma or tab asks for a column and keeps only it). A .csv goes through a CSV parser
+# (papaparse) instead, which keeps a quoted field whole.
+_SPLIT_BY_IMPORT = re.compile(r'[,\t"\r\n]')
+
+
+def list_file_name(name: str, items: list[str] | None = None) -> str:
+    """A safe file name for a list (Scratch ignores the file name on import): ``lists/<name>.txt``,
+    or ``.csv`` when an item would be split by the .txt import (TextImage strings)."""
     safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "list"
-    return f"lists/{safe}.txt"
+    csv = items is not None and any(_SPLIT_BY_IMPORT.search(it) for it in items)
+    return f"lists/{safe}{'.csv' if csv else '.txt'}"
+
+
+def list_file_bytes(fname: str, items: list[str]) -> bytes:
+    """One item per line, no trailing newline (scratch.md 3); in a .csv every item is one quoted
+    field (RFC 4180: quotes doubled), so the import reads one column and unquotes it."""
+    if fname.endswith(".csv"):
+        return "\n".join('"' + it.replace('"', '""') + '"' for it in items).encode("utf-8")
+    return "\n".join(items).encode("utf-8")
 
 
 def _colour_list(rgba: np.ndarray, mode: str):
@@ -130,6 +148,11 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         vals, kind = _colour_list(mc, cfg.color_format)
         out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
 
+    two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
+    if cfg.two_sided == "yes" or (cfg.two_sided == "auto" and (two.any() or "bsp" in scene.artefacts)):
+        out.append(ScratchList(n.two_sided, two.astype(np.int64), 1,
+                               "1 if the material is two-sided (drawn from both sides), 0 if single-sided", "int"))
+
     want_tri = cfg.triangle_colors == "yes" or (cfg.triangle_colors == "auto" and scene.face_colors is not None)
     if want_tri:
         fc = scene.face_colors if scene.face_colors is not None else scene.triangle_albedo()
@@ -195,13 +218,14 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         items = render_items(lst)
         arr = json_array(items, "string" if lst.kind == "string" else "number")
         arrays[lst.name] = arr
-        fname = list_file_name(lst.name)
-        if fname in used_files:
-            raise ConfigError(f"lists '{used_files[fname]}' and '{lst.name}' map to the same file {fname}",
+        fname = list_file_name(lst.name, items)
+        stem = fname.rsplit(".", 1)[0]
+        if stem in used_files:
+            raise ConfigError(f"lists '{used_files[stem]}' and '{lst.name}' map to the same file {stem}.*",
                               key="export.names")
-        used_files[fname] = lst.name
+        used_files[stem] = lst.name
         if cfg.txt:
-            files[fname] = "\n".join(items).encode("utf-8")  # no trailing newline (scratch.md 3)
+            files[fname] = list_file_bytes(fname, items)
         info[lst.name] = {"items": len(items), "stride": lst.stride, "doc": lst.doc,
                           "project_json_bytes": project_json_bytes(lst.name, arr),
                           "file": fname if cfg.txt else None}

@@ -1,44 +1,134 @@
-"""After the pipeline: put the outputs, the report and the depfile on disk."""
+"""After the pipeline: put the outputs, the report and the depfile on disk, as one commit.
+
+:func:`check_paths` runs before the bake (``bake run`` calls it first): the output folder can
+be created and written, the depfile is not a folder, and no file the bake is known to read is
+where an output will go. :func:`finish` then stages everything -- lists, projects, textures,
+``report.json``, ``report.md``, ``report.html`` (rendered from the staged bytes, not from the
+folder) and the depfile -- and commits it in one go (:class:`~bake.export.write.Outputs`), so
+an interrupted bake leaves every file old or the whole folder new.
+"""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
+from ..errors import ConfigError
 from ..pipeline import BakeResult
 from . import report as report_mod
-from .write import depfile_text, write_atomic, write_outputs
+from .write import Outputs, check_writable_folder, depfile_text, output_error, remove_orphan_temps
 
 REPORT_FILES = ("report.json", "report.md", "report.html")
 
 
-def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) -> dict[str, Any]:
-    """Write every output under ``out_dir`` and return the report.
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        p, f = path.resolve(), folder.resolve()
+    except OSError:
+        return False
+    return f == p or f in p.parents
 
-    Lists (and other data outputs) are written first, then the report, so a report on disk
-    always describes complete outputs. Limits are checked by the caller (``--strict``).
-    """
+
+def check_paths(out_dir: Path, *, depfile: Path | None = None, inputs: Iterable[Path] = (),
+                names: Iterable[str] = (), label: str = "--out") -> None:
+    """Before baking: every output path given on the command line can be written, exit 2 naming
+    the path otherwise. ``inputs``: files the bake will read (model, config, ``export.into``);
+    ``names``: output names known before the bake (reports, lists.json, the .sb3/.sprite3)."""
     out_dir = Path(out_dir)
+    check_writable_folder(out_dir, label)
+    for sub in ("lists", "assets"):  # folders of ours that already exist must take new files too
+        if (out_dir / sub).is_dir():
+            check_writable_folder(out_dir / sub, f"--out ({sub}/)")
+        elif (out_dir / sub).exists():
+            raise ConfigError(f"{sub} in the output folder is a file, not a folder; remove it or choose "
+                              "another --out", path=out_dir / sub)
+    inputs = [Path(p) for p in inputs if p]
+    for name in list(REPORT_FILES) + list(names):
+        target = out_dir / name
+        for p in inputs:
+            if p.exists() and target.exists() and os.path.samefile(p, target):
+                raise ConfigError(f"refusing to overwrite the input file {p} with the output {name} "
+                                  "(choose another --out)", path=out_dir)
+    if depfile is not None:
+        depfile = Path(depfile)
+        if depfile.is_dir():
+            raise ConfigError("--depfile names a folder, not a file", path=depfile)
+        check_writable_folder(depfile.parent if str(depfile.parent) else Path("."), "--depfile's folder")
+        for p in inputs:
+            if p.exists() and depfile.exists() and os.path.samefile(p, depfile):
+                raise ConfigError("refusing to overwrite an input file with the depfile", path=depfile)
+        if _inside(depfile, out_dir) and depfile.resolve().relative_to(out_dir.resolve()).as_posix() in \
+                set(REPORT_FILES) | set(names):
+            raise ConfigError("--depfile would overwrite an output of the bake", path=depfile)
+
+
+def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) -> dict[str, Any]:
+    """Write every output under ``out_dir`` (and the depfile) and return the report.
+
+    Nothing is renamed until everything is staged: the lists and projects, then the report built
+    from what is staged (its ``outputs`` say what the commit will do), report.html rendered from
+    the staged bytes, the depfile. Limits are checked by the caller (``--strict``)."""
+    out_dir = Path(out_dir)
+    cfg = result.config
     files: dict[str, bytes] = dict(result.scene.artefacts.get("outputs", {}))
     src = result.scene.source
-    protect = set(src.files_read) | ({result.config.source} if result.config.source else set())
+    protect = set(src.files_read) | ({cfg.source} if cfg.source else set())
     assets = {k: len(v) for k, v in files.items() if k.startswith("assets/")}
-    status = write_outputs(out_dir, files, protect=protect, also_ours=REPORT_FILES)
-    rep = report_mod.build(result, outputs=status, assets=assets)
-    # report.json is rewritten by every bake (Make uses it as the "baked" target)
-    if not write_atomic(out_dir / "report.json", report_mod.to_json(rep)):
-        os.utime(out_dir / "report.json")
-    write_atomic(out_dir / "report.md", report_mod.to_markdown(rep).encode("utf-8"))
-    if result.config.report.html:
-        from . import html
+    reports = ["report.json", "report.md"] + (["report.html"] if cfg.report.html else [])
+    with Outputs(out_dir, protect=protect) as outs:
+        outs.check(sorted(files) + reports)  # before anything is created
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise output_error(e, out_dir, "cannot create the output folder") from None
+        remove_orphan_temps(out_dir)
+        outs.add_all(files)
+        status = dict(outs.status)
+        ours = set(files) | set(reports)
+        for rel in outs.removals():
+            if rel not in ours and (out_dir / rel).is_file():
+                status[rel] = "removed"
+        rep = report_mod.build(result, outputs=status, assets=assets)
+        rep_json = report_mod.to_json(rep)
+        outs.add("report.json", rep_json, always=True)  # Make uses it as the "baked" target
+        outs.add("report.md", report_mod.to_markdown(rep).encode("utf-8"))
+        if cfg.report.html:
+            from . import html
 
-        w = result.config.report.preview_width
-        html.write(out_dir, width=w, height=max(1, w * 3 // 4))
-    if depfile is not None:
-        deps = [p.resolve() for p in src.files_read]
-        if result.config.source:
-            deps.append(result.config.source)
-        targets = [(out_dir / f).resolve() for f in sorted(files)] + [(out_dir / "report.json").resolve()]
-        write_atomic(Path(depfile), depfile_text(targets, sorted(set(deps))).encode("utf-8"))
+            w = cfg.report.preview_width
+            page, _ = html.build(out_dir, width=w, height=max(1, w * 3 // 4),
+                                 files={**files, "report.json": rep_json})
+            outs.add("report.html", page.encode("utf-8"))
+        if depfile is not None:
+            outs.add_file(Path(depfile), depfile_for(result, out_dir).encode("utf-8"))
+        outs.commit()
     return rep
+
+
+def depfile_for(result: BakeResult, out_dir: Path) -> str:
+    """Make rules: ``OUT/report.json`` (named as ``--out`` was given, so it matches the Makefile's
+    own target name) depends on every file the bake read, and on the folder of every file the
+    model names that was not found (adding the file there changes the folder's time, so make
+    rebakes)."""
+    src = result.scene.source
+    deps = [p.resolve() for p in src.files_read]
+    if result.config.source:
+        deps.append(Path(result.config.source).resolve())
+    for p in getattr(src, "files_missing", ()):
+        deps.extend(_watch_folders(Path(p)))
+    # report.json alone: every bake rewrites it. Naming the list files too would make them targets
+    # with no recipe that look out of date after every input edit (they are rewritten only when
+    # their bytes change), so every rule consuming them would rerun.
+    return depfile_text([out_dir / "report.json"], sorted(set(deps)))
+
+
+def _watch_folders(missing: Path) -> list[Path]:
+    """The nearest existing folder on the way to a missing file: creating the file (or a folder
+    on its way) there changes that folder's modification time."""
+    p = Path(os.path.abspath(missing)).parent
+    while not p.is_dir():
+        if p.parent == p:
+            return []
+        p = p.parent
+    return [p.resolve()]

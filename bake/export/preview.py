@@ -111,17 +111,30 @@ def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
 
 
 # --------------------------------------------------------------------------- cameras
+def stage_camera(cam, width: int = 480) -> Camera:
+    """The reader sprite's camera (``bake.scratch.readers.Camera``: position, yaw, pitch, focal on
+    the 480 x 360 stage) as a render camera ``width`` pixels wide, so a preview shows exactly the
+    stage the green flag draws (scaled): the same projection, the same mirror sense."""
+    scale = width / 480.0
+    return Camera.yaw_pitch((cam.x, cam.y, cam.z), cam.yaw, cam.pitch, cam.focal * scale, width=width,
+                            height=int(round(360 * scale)), near=cam.near)
+
+
 def cameras(verts: np.ndarray, width: int = 320, height: int = 240, fov: float = 45.0
             ) -> list[tuple[str, Camera]]:
-    """Three views that frame the model's bounding sphere: front-right above, back-left, top.
-    The frame is the export's (y up); "front" looks along +z as in the default left-handed frame."""
+    """Four views: the green flag's (the reader sprite's camera, :func:`bake.scratch.project.auto_camera`,
+    on a stage-shaped image ``width`` wide), then three that frame the model's bounding sphere:
+    front right above, back left, top. The frame is the export's (x right, y up, z into the
+    screen): "front" looks along +z, "right" is +x."""
+    from ..scratch.project import auto_camera
+
+    out = [("green flag", stage_camera(auto_camera(verts), width))] if len(verts) else []
     lo, hi = verts.min(0), verts.max(0)
     c = (lo + hi) / 2.0
     r = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-12)
     tan_v = math.tan(math.radians(fov) / 2.0)
     tan_h = tan_v * width / height
-    out = []
-    for name, az, el in (("front right", -35.0, 25.0), ("back left", 145.0, 20.0), ("top", -10.0, 80.0)):
+    for name, az, el in (("front right", 35.0, 25.0), ("back left", -145.0, 20.0), ("top", 10.0, 80.0)):
         a, e = math.radians(az), math.radians(el)
         d = np.array([math.sin(a) * math.cos(e), math.sin(e), -math.cos(a) * math.cos(e)])
         probe = Camera(position=tuple(c + d), look_at=tuple(c), fov=fov, width=width, height=height)
@@ -254,20 +267,85 @@ def difference(painter: Image, zbuf: Image, pimg: np.ndarray, zimg: np.ndarray, 
                  "wrong_fraction": float(wrong.sum() / covered) if covered else 0.0}
 
 
+def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5) -> tuple[View, Image]:
+    """One view (see :func:`render_views`) and the painter's :class:`bake.render.Image` behind it
+    (which triangle each pixel shows, how far it is from that triangle's edge)."""
+    corners = mesh.corners
+    diag = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if len(mesh.verts) else 1.0
+    two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
+    order, how = painter_order(mesh, cam.position)
+    pim = render(cam, corners, mode="painter", order=order, two_sided=two)
+    zim = render(cam, corners, mode="zbuffer", two_sided=two)
+    pimg, zimg = shade(mesh, cam, pim), shade(mesh, cam, zim)
+    diff, stats = difference(pim, zim, pimg, zimg, cam, corners, tie * diag)
+    stats.update({"order": how, "drawn": int(len(order)), "colours": mesh.colour_source})
+    return View(name, cam, pimg, zimg, diff, stats), pim
+
+
 def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1e-5) -> list[View]:
     """Each camera of :func:`cameras`: painter's render in the engine's order, the z-buffer
     render, and their difference. ``tie``: faces this close (a fraction of the bounding-box
     diagonal) count as coplanar (:func:`difference`)."""
-    corners = mesh.corners
-    diag = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if len(mesh.verts) else 1.0
-    two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
-    views = []
-    for name, cam in cameras(mesh.verts, width, height):
-        order, how = painter_order(mesh, cam.position)
-        pim = render(cam, corners, mode="painter", order=order, two_sided=two)
-        zim = render(cam, corners, mode="zbuffer", two_sided=two)
-        pimg, zimg = shade(mesh, cam, pim), shade(mesh, cam, zim)
-        diff, stats = difference(pim, zim, pimg, zimg, cam, corners, tie * diag)
-        stats.update({"order": how, "drawn": int(len(order)), "colours": mesh.colour_source})
-        views.append(View(name, cam, pimg, zimg, diff, stats))
-    return views
+    return [render_view(mesh, name, cam, tie)[0] for name, cam in cameras(mesh.verts, width, height)]
+
+
+# --------------------------------------------------------------------------- a player's stage
+def stage_view(mesh: Mesh, cam, tie: float = 1e-5) -> tuple[View, Image]:
+    """The green flag's stage at full size (480 x 360) for the reader camera ``cam``
+    (``bake.scratch.readers.Camera``): what a Scratch player should show."""
+    return render_view(mesh, "stage", stage_camera(cam, 480), tie)
+
+
+def stage_agreement(stage: np.ndarray, view: View, painter: Image, *, margin: int = 2,
+                    background=(255, 255, 255)) -> dict[str, Any]:
+    """Compare a player's stage image (H, W, 3 uint8) with the preview of the same camera.
+
+    A pixel is *interior* when the preview shows the same triangle at every pixel within
+    ``margin`` pixels of it (so no triangle edge, and no pen stroke of a neighbour, is near) and
+    *empty* when the preview shows no triangle within ``margin``. Returns: the fraction of interior
+    pixels whose colour is within 0, 1, 2 and 8 levels (largest channel difference), the interior
+    pixels the player left as background, the empty pixels it painted, and the counts.
+
+    Small triangles leave few interior pixels, so also: of the *covered* pixels (the preview shows
+    a triangle at the pixel and at its 8 neighbours: not on the silhouette, where the pen's
+    antialiased edge blends with the background), the fraction whose colour is within 1 level
+    of the preview's colour at the pixel or at one of its 8 neighbours (``covered_within_1``; the
+    pen's stroke is 2 pixels wide, so a triangle's colour may reach one pixel past its edge)."""
+    tid = painter.tri_id
+    H, W = tid.shape
+    if stage.shape[:2] != (H, W):
+        raise ValueError(f"stage image is {stage.shape[1]}x{stage.shape[0]}, the preview {W}x{H}")
+    pad = np.pad(tid, margin, mode="edge")
+    same = np.ones((H, W), bool)
+    none = np.ones((H, W), bool)
+    for dy in range(-margin, margin + 1):
+        for dx in range(-margin, margin + 1):
+            win = pad[margin + dy:margin + dy + H, margin + dx:margin + dx + W]
+            same &= win == tid
+            none &= win < 0
+    interior = same & (tid >= 0)
+    empty = none & (tid < 0)
+    d = np.abs(stage.astype(np.int16) - view.painter.astype(np.int16)).max(2)
+    bg = np.all(stage == np.asarray(background, np.uint8), axis=2)
+    n = int(interior.sum())
+    di = d[interior]
+
+    def frac(x):
+        return float(x.sum() / n) if n else 0.0
+
+    cov = np.ones((H, W), bool)
+    best = np.full((H, W), 10**4, np.int32)
+    sp = np.pad(stage.astype(np.int16), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    vp = np.pad(view.painter.astype(np.int16), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    tp = np.pad(tid, 1, mode="edge")
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            cov &= tp[1 + dy:1 + dy + H, 1 + dx:1 + dx + W] >= 0
+            best = np.minimum(best, np.abs(sp[1:1 + H, 1:1 + W] - vp[1 + dy:1 + dy + H, 1 + dx:1 + dx + W]).max(2))
+    nc = int(cov.sum())
+    return {"interior_pixels": n, "covered_pixels": int((tid >= 0).sum()), "empty_pixels": int(empty.sum()),
+            "covered_inner_pixels": nc,
+            "covered_within_1": float((best[cov] <= 1).sum() / nc) if nc else 0.0,
+            "within_0": frac(di <= 0), "within_1": frac(di <= 1), "within_2": frac(di <= 2),
+            "within_8": frac(di <= 8), "max_difference": int(di.max()) if n else 0,
+            "interior_left_blank": int((bg & interior).sum()), "empty_painted": int((~bg & empty).sum())}

@@ -10,6 +10,8 @@
 * ``lists``: name -> {items, stride, bytes, file, doc}; ``bytes`` is what the list adds to project.json
 * ``limits``: list of {name, value, limit, ok, note}
 * ``effects``: list of {name, ran, reason, ...}: every stage and effect that ran or was skipped, and why
+* ``problems``: list of {stage, message}: what makes ``--strict`` fail besides a limit (e.g. a lit
+  bake whose colours are all black); each is also among its stage's warnings
 * ``outputs``: relative path -> "written" | "unchanged" | "removed"
 * ``seconds``: wall time of the whole bake
 """
@@ -69,7 +71,8 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "report_version": REPORT_VERSION,
         "tool": {"name": "scratch-bake", "version": __version__},
         "input": {"path": str(src.path) if src.path else None, "format": src.format,
-                  "files_read": [str(p) for p in src.files_read]},
+                  "files_read": [str(p) for p in src.files_read],
+                  "config": str(result.config.source) if result.config.source else None},
         "scene": counts(scene),
         "materials": [{"name": m.name, "color": [round(float(c), 6) for c in m.color],
                        "double_sided": bool(m.double_sided),
@@ -79,6 +82,7 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "lists": lists,
         "limits": limits,
         "effects": effects,
+        "problems": [{"stage": r.name, "message": m} for r in result.records for m in r.problems],
         "outputs": dict(sorted((outputs or {}).items())),
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
@@ -101,6 +105,27 @@ def _limit_pct(lim: dict) -> str:
     return f"{100.0 * lim['value'] / lim['limit']:.1f}%"
 
 
+def _counts(c: dict) -> str:
+    """Triangles and vertices; before triangulation (import, transform) the polygons instead of
+    "triangles 0"; nothing before the first stage."""
+    if not any(c.get(k) for k in ("polygons", "triangles", "vertices")):
+        return "–"  # the import stage starts from nothing
+    t, p = c.get("triangles", 0), c.get("polygons", 0)
+    parts = [f"polygons {p}" if not t and p else f"triangles {t}"]
+    parts += [f"{k} {c[k]}" for k in ("vertices", "corners") if k in c]
+    return ", ".join(parts)
+
+
+def fmt_accuracy(key: str, v: Any) -> str:
+    """An accuracy figure with its unit: Hausdorff distances are fractions of the bounding-box
+    diagonal, shown as a percentage of it."""
+    if key.startswith("hausdorff") and isinstance(v, float):
+        return f"{100 * v:.3g}% of the diagonal"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    return f"{v:.4g}"
+
+
 def to_markdown(report: dict[str, Any]) -> str:
     s = report["scene"]
     out = [f"# Bake report: {Path(report['input']['path'] or '').name}", "",
@@ -108,10 +133,8 @@ def to_markdown(report: dict[str, Any]) -> str:
            f"{s['triangles']} triangles, {s['vertices']} vertices, {s['materials']} materials", "",
            "## Stages", "", "| stage | seconds | in | out | accuracy | warnings |", "|---|---:|---|---|---|---|"]
     for st in report["stages"]:
-        cin = ", ".join(f"{k} {v}" for k, v in st["counts_in"].items() if k in ("triangles", "vertices"))
-        cout = ", ".join(f"{k} {v}" for k, v in st["counts_out"].items() if k in ("triangles", "vertices"))
-        acc = ", ".join(f"{k} {v:.4g}" if isinstance(v, (int, float)) else f"{k} {v}"
-                        for k, v in st["accuracy"].items())
+        cin, cout = _counts(st["counts_in"]), _counts(st["counts_out"])
+        acc = ", ".join(f"{k} {fmt_accuracy(k, v)}" for k, v in st["accuracy"].items())
         warn = "<br>".join(w.replace("|", "\\|") for w in st["warnings"])
         out.append(f"| {st['name']} | {st['seconds']:.3f} | {cin} | {cout} | {acc} | {warn} |")
     out += ["", "## Effects", "", "| effect | ran | reason |", "|---|---|---|"]
@@ -134,16 +157,23 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     lines = [f"{Path(report['input']['path'] or '').name}: {s['triangles']} triangles, {s['vertices']} vertices, "
              f"{s['materials']} materials in {report['seconds']:.2f} s"]
     for st in report["stages"]:
-        acc = " ".join(f"{k}={v:.3g}" for k, v in st["accuracy"].items() if isinstance(v, (int, float)))
-        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}")
+        nums = {k: v for k, v in st["accuracy"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        acc = " ".join(f"{k}={100 * v:.3g}%" if k.startswith("hausdorff") else f"{k}={v:.3g}" for k, v in nums.items())
+        if any(k.startswith("hausdorff") for k in nums):
+            acc += " (Hausdorff distances in % of the bounding-box diagonal)"
+        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip())
+        problems = set(st.get("problems", []))
         for w in st["warnings"]:
-            lines.append(f"    warning: {w}")
+            lines.append(f"    {'PROBLEM' if w in problems else 'warning'}: {w}")
     total = sum(v["bytes"] for v in report["lists"].values())
     lines.append(f"  lists: {len(report['lists'])}, {sum(v['items'] for v in report['lists'].values())} items, "
                  f"{_fmt_bytes(total)} in project.json")
     for lim in report["limits"]:
         if not lim["ok"]:
             lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']} > {lim['limit']}")
+    if report.get("problems"):
+        lines.append(f"  {len(report['problems'])} PROBLEM(S) (--strict fails the bake): "
+                     + "; ".join(f"{p['stage']}: {p['message']}" for p in report["problems"]))
     pj = [lim for lim in report["limits"] if lim["name"].startswith("project.json")]
     if pj:
         lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])})")

@@ -532,7 +532,8 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
     if not len(tris):
         rec.warn("the scene has no triangles" + (" (no scenes or nodes)" if not roots else ""))
 
-    source = SourceInfo(path=job.path, files_read=tuple(doc.files_read), format=doc.format)
+    source = SourceInfo(path=job.path, files_read=tuple(doc.files_read), format=doc.format,
+                        files_missing=tuple(doc.files_missing))
     scene = Scene(positions=positions.astype(np.float64), poly_sizes=np.full(len(tris), 3, np.int64),
                   poly_indices=tris.reshape(-1).astype(np.int64), poly_material=poly_material,
                   poly_uvs=poly_uvs, vertex_colors=vcol, materials=tuple(materials),

@@ -85,6 +85,7 @@ class GltfDocument:
         self.path = Path(path)
         self.folder = self.path.parent
         self.files_read: list[Path] = [self.path]
+        self.files_missing: list[Path] = []  # images named and not found (for --depfile)
         self.bin_chunk: bytes | None = None
         self.warnings: list[str] = []
         self.is_glb = raw[:4] == GLB_MAGIC
@@ -572,6 +573,8 @@ class GltfDocument:
                 shown = uri if len(uri) <= 80 else uri[:77] + "..."
                 raise self.error(f"uri '{shown}' cannot be used: {e.strerror}", w) from None
             if not found:
+                if p not in self.files_missing:
+                    self.files_missing.append(p)
                 return ImageRef(path=p, mime=mime, missing=True)
             self._remember(p)
             return ImageRef(path=p, mime=mime)

@@ -518,6 +518,7 @@ class _Parser:
         self.t: _Tokens | None = None
         self.details: dict = {}
         self.files: list[Path] = [Path(os.path.abspath(path))]
+        self.missing: list[Path] = []  # named and not found (for --depfile)
         self.phys = 0  # physical lines in the blocks so far
         self.nv = self.nt = self.nf = self.nvn = 0  # v, vt, f, vn lines so far
         self.best = _NO_ERROR  # the first error kind found so far
@@ -1063,7 +1064,7 @@ class _Parser:
         if len(sizes_k) == 0:
             rec.warn("no faces in file" if NF == 0 else "no faces left after dropping bad faces")
         if self.latin1.n:
-            rec.warn(f"names on {self.latin1.n} line(s) are not UTF-8 and were decoded as "
+            rec.warn(f"names on {self.latin1.n} line(s) of {self.path} are not UTF-8 and were decoded as "
                      f"Latin-1 (lines {self.latin1.text()})")
         return Scene(
             positions=positions,
@@ -1073,7 +1074,8 @@ class _Parser:
             poly_uvs=poly_uvs,
             vertex_colors=colors,
             materials=tuple(materials),
-            source=SourceInfo(path=self.files[0], files_read=tuple(self.files), format="obj"),
+            source=SourceInfo(path=self.files[0], files_read=tuple(self.files), format="obj",
+                              files_missing=tuple(dict.fromkeys(self.missing))),
         )
 
     def other_lines(self) -> list[tuple[int, str]]:
@@ -1133,6 +1135,8 @@ class _Parser:
                 cands.append((n, _find_file(base, n, outside=outside), outside or whole))
             for name, p, outside in cands:
                 if p is None:
+                    if not outside:
+                        self.missing.extend(_looked_for(base, name))
                     why = (f"outside the model's folder ({outside[0]}), not read" if outside else
                            "not found")
                     self.rec.warn(f"material library {why}: '{name}' ({self.path}:{ln}); "
@@ -1142,7 +1146,7 @@ class _Parser:
                     continue
                 seen.add(p)
                 self.files.append(p)
-                for nm, m in _parse_mtl(p, self.rec, root=base).items():
+                for nm, m in _parse_mtl(p, self.rec, root=base, missing=self.missing).items():
                     if nm in mats:
                         self.rec.warn(f"material '{nm}' is defined again in {p}; the first "
                                       f"definition is kept")
@@ -1195,9 +1199,19 @@ def _find_file(base: Path, name: str, root: Path | None = None,
     return None
 
 
-def _parse_mtl(path: Path, rec: StageRecord, root: Path | None = None) -> dict[str, Material]:
+def _looked_for(base: Path, name: str) -> list[Path]:
+    """Where :func:`_find_file` looked for ``name``: as written, and its base name next to ``base``."""
+    p = Path(name.strip().strip('"').replace("\\", "/"))
+    if not p.name:
+        return []
+    return list(dict.fromkeys([Path(os.path.normpath(p if p.is_absolute() else base / p)), base / p.name]))
+
+
+def _parse_mtl(path: Path, rec: StageRecord, root: Path | None = None,
+               missing: list[Path] | None = None) -> dict[str, Material]:
     """Read one MTL file: newmtl, Kd, d, Tr, map_Kd (see the module docstring). Textures must lie
-    in ``root`` (the OBJ's folder; default the MTL's)."""
+    in ``root`` (the OBJ's folder; default the MTL's). A texture not found is appended to
+    ``missing`` (where it was looked for)."""
     try:
         raw = path.read_bytes()
     except OSError as e:
@@ -1316,6 +1330,8 @@ def _parse_mtl(path: Path, rec: StageRecord, root: Path | None = None) -> dict[s
             else:
                 outside: list[Path] = []
                 tex = _find_file(base, fname, root=root or base, outside=outside)
+                if tex is None and not outside and missing is not None:
+                    missing.extend(_looked_for(base, fname))
                 if tex is None:
                     why = f"outside the model's folder ({outside[0]}), not read" if outside else "not found"
                     rec.warn(f"texture {why}: '{fname}' (material '{name}', {path}:{ln}); "

@@ -71,6 +71,8 @@ class EffectStats:
     se_n: int = 0
     ran: bool = False
     reason: str = ""
+    # ``error`` = this x the pair estimate (1 = uncalibrated; AO sets its measured calibration)
+    error_scale: float = 1.0
     warnings: list[str] = field(default_factory=list)
     timers: Timers = field(default_factory=Timers)
     extra: dict = field(default_factory=dict)
@@ -89,9 +91,9 @@ class EffectStats:
 
     @property
     def error(self) -> float:
-        """RMS over the sample points of each point's standard error (sample pairs only): an
-        estimate of the RMSE of this effect's values against the exact ones."""
-        return float(np.sqrt(self.se_sq_sum / self.se_n)) if self.se_n else 0.0
+        """RMS over the sample points of each point's standard error (sample pairs only), times
+        ``error_scale``: an estimate of the RMSE of this effect's values against the exact ones."""
+        return float(self.error_scale * np.sqrt(self.se_sq_sum / self.se_n)) if self.se_n else 0.0
 
     @property
     def error_bound(self) -> float:
@@ -105,6 +107,8 @@ class EffectStats:
             d["error"] = round(self.error, 8)
             d["error_bound"] = round(self.error_bound, 8)
             d["error_max"] = round(self.se_max, 8)
+            if self.error_scale != 1.0:
+                d["error_calibration"] = round(self.error_scale, 6)
             d["samples"] = int(self.samples)
             d["points"] = int(self.points)
             d["timing"] = self.timers.as_dict()

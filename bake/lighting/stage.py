@@ -14,14 +14,21 @@ Flow (each step in its own module):
    ``face_colors``. The linear irradiance and every component with its standard error stay in
    ``scene.artefacts["lighting"]`` (a :class:`LightingResult`).
 
-The record lists every effect that ran (rays, seconds, error = RMS standard error of the point
-estimates, in irradiance units; AO in AO units) and every one that was skipped, with the reason,
-and splits the time into ray generation, Embree and shading (thread-seconds).
+The record lists every effect that ran (rays, seconds, error = an estimate of the RMSE of its
+values over the sample points: the RMS of the points' standard errors, in irradiance units; AO in
+AO units and calibrated against a high-sample reference, see ``ao.py``) and every one that was
+skipped, with the reason, and splits the time into ray generation, Embree and shading
+(thread-seconds). A bake whose every colour is black, or that has no light source, gets a
+warning, the effects ``light sources`` / ``all black`` and a record problem (``--strict`` fails).
 """
 
 from __future__ import annotations
 
 import time
+
+import numpy as np
+
+from ..colorspace import to_bytes
 from ..config import LightingConfig
 from ..record import StageRecord
 from ..scene import Scene
@@ -76,6 +83,45 @@ def _effect_order(plan: Plan, baker: Baker | None) -> list[dict]:
     return out
 
 
+def _sources(plan: Plan, cfg: LightingConfig) -> tuple[bool, str]:
+    """Whether anything can light the scene, and what (for the ``light sources`` effect)."""
+    parts = [lt.label for lt in plan.lights]
+    if plan.sky:
+        parts.append("sky")
+    if np.any(plan.ambient > 0):
+        ao_only = not any(x > 0 for x in cfg.ambient)  # the plan took the ambient as white
+        parts.append("ambient " + ("white (AO-only bake)" if ao_only
+                                   else "[" + ", ".join(f"{x:g}" for x in plan.ambient) + "]"))
+    if parts:
+        return True, ", ".join(parts)
+    return False, ("no light source: no usable light (lighting.lights and the model's), lighting.sky off or "
+                   "black, lighting.ambient black and no AO-only bake")
+
+
+def _black(out: Scene, baker: Baker, cfg: LightingConfig, has_source: bool, what: str) -> str | None:
+    """A message when every colour the bake writes is black in 8 bits (``None`` otherwise)."""
+    used = np.zeros(out.n_vertices, bool)
+    used[np.asarray(out.triangles, np.int64).ravel()] = True
+    shown = [to_bytes(out.face_colors[:, :3])]
+    if out.vertex_colors is not None:
+        shown.append(to_bytes(out.vertex_colors[used, :3]))
+    if any(np.any(b > 0) for b in shown):
+        return None
+    res = out.artefacts["lighting"]
+    if not has_source:
+        why = what
+    elif cfg.exposure == 0:
+        why = "lighting.exposure = 0"
+    elif not (np.any(res.face_irradiance > 0) or np.any(res.vertex_irradiance > 0)):
+        why = "no light reaches a surface (every light faces away, is out of range or is shadowed)"
+    elif not np.any(baker.albedo()[:, :3] > 0) and cfg.vertex_output == "color":
+        why = "every surface colour (albedo) is black"
+    else:
+        why = (f"the light is too dim to show in 8 bits (largest irradiance "
+               f"{float(max(res.face_irradiance.max(), res.vertex_irradiance.max())):.3g})")
+    return f"every lit colour is black: {why}"
+
+
 def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     rec = StageRecord(name="lighting")
@@ -89,6 +135,14 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
     baker = Baker(scene, cfg, plan, albedo)
     out = baker.run()
     rec.effects = _effect_order(plan, baker)
+    has_source, what = _sources(plan, cfg)
+    rec.effects.insert(0, {"name": "light sources", "ran": has_source, "reason": what, "rays": 0,
+                           "seconds": 0.0})
+    black = _black(out, baker, cfg, has_source, what)
+    if black is not None:  # loudly: a warning, an effect, and --strict fails the bake
+        rec.effects.insert(1, {"name": "all black", "ran": True, "reason": black, "rays": 0, "seconds": 0.0})
+        rec.warn(black)
+        rec.problems.append(black)
     if cfg.subdivide:
         rec.effects.append({"name": "subdivide", "ran": baker.subdiv["added"] > 0, "rays": 0, "seconds": 0.0,
                             "reason": baker.subdiv["stopped"], "rounds": baker.subdiv["rounds"],

@@ -134,7 +134,9 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
             sprite = sb3.Target(cfg.sprite_name, lists=values)
         if costumes:
             sprite.costumes = list(sprite.costumes) + list(costumes)
-        files[f"{name}.sprite3"] = sb3.write_sprite3(sprite)
+        # named like the .sb3 (export.sb3_name), so the two sit side by side
+        stem = Path(_cfg(cfg, "sb3_name", "") or f"{name}.sb3").stem
+        files[f"{stem}.sprite3"] = sb3.write_sprite3(sprite)
     into = _cfg(cfg, "into", "")
     if into:
         src = Path(into)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -290,6 +291,32 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
     return scene, rec
 
 
+def _atlas_warnings(atlas, cfg: TexturesConfig, rec: StageRecord) -> None:
+    """Say when xatlas grew the atlas past the requested resolution, and what the lightmap's lists
+    will cost against Scratch's limits (known from the atlas size, before the lighting work)."""
+    from ..scratch.limits import LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
+
+    lm = cfg.lightmap
+    W, H = atlas.width, atlas.height
+    key = "textures.lightmap.resolution"
+    if lm.texels_per_unit <= 0 and max(W, H) > lm.resolution:
+        rec.warn(f"lightmap: xatlas made the atlas {W}x{H}, past {key} = {lm.resolution} (it grows the "
+                 "atlas when the charts and their padding do not fit); the lightmap lists and costume are "
+                 "that size")
+    if not lm.lit or "list" not in cfg.encodings:
+        return
+    items = W * H
+    if items > LIST_ITEM_LIMIT:
+        side = int(math.isqrt(LIST_ITEM_LIMIT) / max(W, H) * lm.resolution) // 16 * 16
+        rec.warn(f"lightmap: its colour list will have {items:,} items ({W}x{H}), past the {LIST_ITEM_LIMIT:,} "
+                 f"of vanilla Scratch's `add to list`; use {key} <= {side} or drop \"list\" from "
+                 "textures.encodings (the TextImage and costume encodings carry it too)")
+    est = items * 9  # a colour number is up to 8 digits and a comma in project.json
+    if est > PROJECT_JSON_LIMIT:
+        rec.warn(f"lightmap: its colour list alone adds about {est / 1048576:.1f} MiB to project.json, past "
+                 f"the 5 MiB upload limit; lower {key} or drop \"list\" from textures.encodings")
+
+
 def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
     from . import lightmap
 
@@ -302,7 +329,13 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
         rec.effects.append({"name": "lightmap", "ran": False, "reason": str(e),
                             "seconds": round(time.perf_counter() - t0, 6)})
         return scene
+    _atlas_warnings(atlas, cfg, rec)
+    # before any texel work (the covering below, the lighting stage's bake): will it fit in memory?
+    mem = lightmap.check_memory(atlas, lm, lit=lm.lit)
+    if mem.get("warn"):
+        rec.warn(f"lightmap: {mem.pop('warn')}")
     figs = lightmap.coverage_figures(scene, atlas)
+    figs.update(mem)
     figs.update({"xatlas_seconds": round(atlas.seconds, 6), "cached": atlas.cached, "key": atlas.key[:16],
                  "xatlas_version": atlas.xatlas_version, "texels_per_unit": atlas.texels_per_unit,
                  "xatlas_scale": atlas.xatlas_scale})

@@ -66,9 +66,32 @@ def test_collapse_and_reinsertion_never_raise_sah():
     c = collapse(b, 4)
     check_tree(c, lo, hi, 4)
     assert sah_cost(c) <= sah_cost(b) + 1e-12
-    r = reinsertion(b, passes=2, fraction=0.2, budget_s=10)
+    r = reinsertion(b, passes=2, fraction=0.2)
     check_tree(r, lo, hi, 1)
     assert sah_cost(r) <= sah_cost(b) * (1 + 1e-12)
+
+
+def test_reinsertion_budget_is_work_not_time(monkeypatch):
+    """Same input, same tree however busy the machine is: the optimiser's budget counts node
+    visits. With a clock that jumps 100 s at every reading (a loaded machine, or a time budget's
+    view of one) the result must equal the unhurried one, and a small budget stops early the same
+    way every time."""
+    import time as time_mod
+
+    sc = soup(600, seed=5)
+    lo, hi = triangle_bounds(sc.triangle_vertices())
+    b = build_binned(lo, hi, leaf_size=1)
+    calm = reinsertion(b, passes=2, fraction=0.2)
+    small = reinsertion(b, passes=2, fraction=0.2, budget=2000)
+    assert small.info["reinsertion_budget_reached"] and not calm.info["reinsertion_budget_reached"]
+    clock = iter(range(0, 10**9, 100))
+    monkeypatch.setattr(time_mod, "perf_counter", lambda: float(next(clock)))
+    busy = reinsertion(b, passes=2, fraction=0.2)
+    busy_small = reinsertion(b, passes=2, fraction=0.2, budget=2000)
+    for x, y in ((calm, busy), (small, busy_small)):
+        for f in ("lo", "hi", "left", "right", "first", "count"):
+            assert np.array_equal(getattr(x, f), getattr(y, f))
+    assert sah_cost(calm) < sah_cost(small) <= sah_cost(b) * (1 + 1e-12)
 
 
 @pytest.mark.corpus
@@ -79,7 +102,7 @@ def test_teapot_sah_at_or_below_reference_and_high_quality_lower(corpus):
     check_tree(b, lo, hi, 4)
     # the plain binned-SAH reference measured here: 24.1 (8 bins)
     assert round(sah_cost(b), 1) <= 24.1
-    h = build(lo, hi, leaf_size=4, bins=8, quality="high", high_seconds=3)
+    h = build(lo, hi, leaf_size=4, bins=8, quality="high")
     check_tree(h, lo, hi, 4)
     assert sah_cost(h) < 0.97 * sah_cost(b)
 

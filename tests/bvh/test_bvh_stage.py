@@ -85,3 +85,51 @@ def test_empty_scene_and_config_errors():
     assert cfg.bvh.layout == "wide4" and cfg.bvh.quant_bits == 5
     with pytest.raises(ConfigError):
         config_mod.load(None, ["bvh.layout=\"octree\""])
+
+
+def _sah_of_binary_list(nodes: np.ndarray) -> float:
+    """The SAH (C_trav = C_int = 1) read back from a written ``binary`` node list alone, as
+    docs/formats-bvh.md describes it: 7 items per record, link < 0 interior, link > 0 leaf with
+    ``link mod 16`` triangles."""
+    rec = np.asarray(nodes, float).reshape(-1, 7)
+    e = np.maximum(rec[:, 3:6] - rec[:, 0:3], 0.0)
+    a = e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
+    link = rec[:, 6]
+    leaf = link > 0
+    return float((a[~leaf].sum() + (a[leaf] * np.mod(link[leaf], 16)).sum()) / a[0])
+
+
+@pytest.mark.parametrize("precision", [2, 5])
+def test_sah_cost_is_the_written_trees(precision):
+    """report.json's sah_cost is the SAH of the boxes as the lists hold them (rounded outward
+    onto the list grid), not of the tight float64 boxes (issue 17, item 5)."""
+    sc = soup(400, seed=3, degenerate=0)
+    out, rec = stage(sc, BVHConfig(enabled=True, layout="binary", precision=precision))
+    written = _sah_of_binary_list(out.lists["bvh nodes"].values)
+    assert rec.accuracy["sah_cost"] == pytest.approx(written, rel=1e-12)
+    # rounding outward only grows boxes: the figure differs from the tight one at a coarse grid
+    assert rec.details["sah_cost_unrounded"] <= written
+    if precision == 2:
+        assert written > rec.details["sah_cost_unrounded"] * (1 + 1e-4)
+    # the 4-wide layouts are made from the same tree and float boxes: the same figure
+    for layout in ("wide4", "quantised"):
+        _, r2 = stage(sc, BVHConfig(enabled=True, layout=layout, precision=precision))
+        assert r2.accuracy["sah_cost"] == rec.accuracy["sah_cost"]
+
+
+@pytest.mark.parametrize("layout", ["wide4", "quantised"])
+def test_stack_bound_uses_the_record_depth(layout):
+    """docs/formats-bvh.md: the 4-wide walk's stack holds at most 3 x record_depth + 1 entries
+    (record_depth: the 4-wide tree's depth in records, reported next to the binary depth)."""
+    from bake.bvh.traverse import trace
+    from bake.bvh.verify import make_rays
+
+    sc = soup(3000, seed=5, degenerate=0)
+    out, rec = stage(sc, BVHConfig(enabled=True, layout=layout, leaf_size=1))
+    enc = out.artefacts["bvh"]["encoded"]
+    D = rec.details["record_depth"]
+    assert 0 < D < rec.details["depth"]  # a record spans about two binary levels
+    o, d, _ = make_rays(enc.tris.reshape(-1, 3, 3), 4000, seed=2)
+    h = trace(enc, o, d)
+    assert h.stack.max() <= 3 * D + 1
+    assert h.stack.max() > D  # the walk does go deep: the bound is not vacuous

@@ -124,7 +124,7 @@ def test_report_html_written_self_contained_and_every_image_decodes(baked):
     page = (out / "report.html").read_text(encoding="utf-8")
     imgs = images_of(page)
     previews = [a for a, _ in imgs if a.startswith(("painter", "z-buffer", "difference"))]
-    assert len(previews) == 9  # three views x (painter, depth buffer, difference)
+    assert len(previews) == 12  # four views (the green flag's first) x (painter, depth buffer, difference)
     assert all(im.shape == (240, 320, 3) for a, im in imgs if a in previews)
     rep = json.loads((out / "report.json").read_text())
     for lim in rep["limits"]:  # a bar per limit, its width the fraction used

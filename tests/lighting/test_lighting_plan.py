@@ -117,3 +117,42 @@ def test_empty_scene_is_skipped():
     from bake.scene import Scene
     out, rec = stage(Scene(), cfg(ao__enabled=True))
     assert not rec.effects[0]["ran"] and "no triangles" in rec.effects[0]["reason"]
+
+
+def test_lit_bake_with_no_light_source_says_so_loudly():
+    """Issue 17, item 1: lighting on, AO and sky off, no lights, ambient black: every colour is
+    black; the record warns, lists an effect saying why, and marks it a problem (--strict fails)."""
+    out, rec = stage(_plane(), cfg())
+    assert np.all(out.face_colors[:, :3] == 0) and np.all(out.vertex_colors[:, :3] == 0)
+    e = _eff(rec)
+    assert not e["light sources"]["ran"] and "no light source" in e["light sources"]["reason"]
+    assert e["all black"]["ran"] and "every lit colour is black: no light source" in e["all black"]["reason"]
+    assert any("every lit colour is black" in w for w in rec.warnings)
+    assert rec.problems and rec.problems[0] in rec.warnings
+    assert rec.to_json()["problems"] == rec.problems
+
+
+@pytest.mark.parametrize("kw,why", [
+    (dict(lights=[sun((0, 1, 0))]), "no light reaches a surface"),  # shines from below
+    (dict(lights=[sun((0, -1, 0))], exposure=0.0), "lighting.exposure = 0"),
+    (dict(ambient=[1e-5] * 3), "too dim to show in 8 bits"),
+])
+def test_lit_bake_whose_every_colour_is_black_says_why(kw, why):
+    out, rec = stage(_plane(), cfg(**kw))
+    e = _eff(rec)
+    assert e["light sources"]["ran"]  # there is a source, yet nothing shows
+    assert why in e["all black"]["reason"] and rec.problems == [e["all black"]["reason"]]
+
+
+def test_black_albedo_is_named_and_a_lit_bake_has_no_problem():
+    pos, tris = grid(4)
+    black = scene(pos, tris, color=(0.0, 0.0, 0.0, 1.0))
+    _, rec = stage(black, cfg(lights=[sun((0, -1, 0))]))
+    assert "albedo" in _eff(rec)["all black"]["reason"]
+    for kw in (dict(lights=[sun((0, -1, 0))]), dict(ambient=[0.2] * 3), dict(ao__enabled=True),
+               dict(sky__enabled=True, sky__samples=4)):
+        out, rec = stage(_plane(), cfg(**kw))
+        e = _eff(rec)
+        assert e["light sources"]["ran"] and "all black" not in e and not rec.problems, kw
+        assert out.face_colors[:, :3].max() > 0
+    assert "ambient white (AO-only bake)" in _eff(stage(_plane(), cfg(ao__enabled=True))[1])["light sources"]["reason"]

@@ -447,10 +447,10 @@ CONFIG_ERRORS = [  # (name, body after [input], line, key)
     ("nan", "[transform]\nscale = nan\n", 4, "transform.scale"),
     ("inf", "[transform]\nscale = -inf\n", 4, "transform.scale"),
     ("bad_choice", '[transform]\nup = "w"\n', 4, "transform.up"),
-    ("negative_scale", "[transform]\nscale = -1.0\n", None, "transform.scale"),
-    ("precision_out_of_range", "[export]\nprecision = 99\n", None, "export.precision"),
+    ("negative_scale", "[transform]\nscale = -1.0\n", 4, "transform.scale"),
+    ("precision_out_of_range", "[export]\nprecision = 99\n", 4, "export.precision"),
     ("stage_range_check", "[bvh]\nenabled = true\nleaf_size = 99\n", 5, "bvh.leaf_size"),
-    ("light_direction_length", '[[lighting.lights]]\nkind = "sun"\ndirection = [0, 1]\n', None,
+    ("light_direction_length", '[[lighting.lights]]\nkind = "sun"\ndirection = [0, 1]\n', 5,
      r"lighting.lights\[0\].direction"),
 ]
 

@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/bench_bsp.py            # everything (about half an hour on 2 busy cores)
     .venv/bin/python benchmarks/bench_bsp.py --quick    # the suite table only
-    .venv/bin/python benchmarks/bench_bsp.py --docs     # rewrite docs/formats-bsp.md's tables from the JSON
+
+The docs tables (docs/formats-bsp.md) are rendered from the JSON by tools/doc_tables.py.
 
 Writes benchmarks/results/bsp.json. "Before" is the builder of BASE_COMMIT (the commit this work
 started from), extracted with ``git archive`` into a temporary folder and run in its own process;
@@ -26,7 +27,6 @@ import json
 import math
 import os
 import platform
-import re
 import shutil
 import subprocess
 import sys
@@ -43,7 +43,6 @@ sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "tests" / "bsp"))
 
 OUT = REPO / "benchmarks" / "results" / "bsp.json"
-DOCS = REPO / "docs" / "formats-bsp.md"
 BASE_COMMIT = "6f0151f"  # the builder before issue 20
 GOAL_SET = ("suzanne", "teapot", "spot", "duck", "house", "bunny")
 SUITE_ORDER = ("suzanne", "teapot", "spot", "duck", "house", "capsule", "cornell", "bunny", "bunny_20k")
@@ -203,7 +202,7 @@ def search_sweep(names) -> dict:
                 t = time.perf_counter()
                 new, _ = stage(s, cfg)
                 sec = time.perf_counter() - t
-                out[key][k]["all" if (key == "candidates" and v == 0) else str(v)] = {
+                out[key][k]["all" if (key == "candidates" and v == 0) else f"v{v}"] = {
                     "inflation": round(new.n_triangles / s.n_triangles - 1, 4), "seconds": round(sec, 2)}
                 print(f"{key} {k} {v}: {new.n_triangles / s.n_triangles - 1:+.1%} {sec:.2f}s", flush=True)
     return out
@@ -293,107 +292,54 @@ def run_walks(old: Path | None, models: dict, tmp: Path) -> dict:
     return out
 
 
-# ---------------------------------------------------------------------------- docs tables
-def _pct(x) -> str:
-    return f"+{x:.1%}" if x >= 0 else f"{x:.1%}"
+# ---------------------------------------------------------------------------- the JSON
+LABELS = {"house": "house (regr01)", "cornell": "cornell box", "bunny_20k": "bunny at 20k"}
 
 
-def doc_tables(res: dict) -> str:
-    """The "Sizes and figures" tables of docs/formats-bsp.md, from the JSON."""
-    m = res["machine"]
-    L = [f"`.venv/bin/python benchmarks/bench_bsp.py` on {m['cpus']} shared cores (load "
-         f"{m['loadavg_start'][0]:.1f} at the start, {m['loadavg_end'][0]:.1f} at the end); \"before\" is the "
-         f"builder of commit {res['base_commit']}, run in its own process next to this one, model by model.", ""]
-    before, after = res.get("before", {}), res["after"]
-    L += ["| model | tris in | before: out | inflation | build s | after: out | inflation | build s | time ratio |",
-          "|---|---|---|---|---|---|---|---|---|"]
+def finish(out: dict) -> dict:
+    """Derived figures the docs tables show (tools/doc_tables.py renders them, never typed):
+    per model before/after side by side with the time ratio, the goals, the walk ratios."""
+    before, after = out.pop("before", {}), out.pop("after", {})
+    models = {}
     for k in SUITE_ORDER:
         if k not in after:
             continue
-        a, b = after[k], before.get(k)
-        bcols = (f"{b['triangles_out']} | {_pct(b['inflation'])} | {b['seconds']:.2f}" if b else "— | — | —")
-        ratio = f"{a['seconds'] / b['seconds']:.2f}×" if b and b["seconds"] > 0 else "—"
-        L.append(f"| {k.replace('_', ' ')} | {a['triangles_in']} | {bcols} | {a['triangles_out']} | "
-                 f"{_pct(a['inflation'])} | {a['seconds']:.2f} | {ratio} |")
-    g = res.get("goals", {})
-    if g:
-        L += ["", f"Geometric mean inflation over {', '.join(GOAL_SET)}: before **{_pct(g['geomean_before'])}**, "
-                  f"after **{_pct(g['geomean_after'])}** (goal: at most half of before, {_pct(g['geomean_before'] / 2)})."
-                  + "".join(f" {k}: {_pct(after[k]['inflation'])} (goal {_pct(v)})." for k, v in GOALS.items()
-                            if k in after)]
-    L += ["", "| model (after) | depth | records | planes | list items | bytes | B/tri out | walk: plane tests | "
-              "tested | drawn | blocks (estimate) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for k in SUITE_ORDER:
-        if k not in after:
-            continue
-        a = after[k]
-        w = a.get("walk", {})
-        L.append(f"| {k.replace('_', ' ')} | {a['tree_depth']} | {a['records_total']} | {a['planes']} | "
-                 f"{a['list_items']} | {a['project_json_bytes']} | {a['bytes_per_triangle']:.1f} | "
-                 f"{w.get('plane_tests', '—')} | {w.get('tested', 0) + w.get('tested_two_sided', 0)} | "
-                 f"{w.get('drawn', 0) + w.get('coplanar_drawn', 0)} | {w.get('blocks_estimate', '—'):,} |")
-    wk = res.get("walks", {})
-    if wk and "skipped" not in wk:
-        L += ["", "One frame's `bsp walk` in scratch-vm from the reader's starting eye (projects baked by each "
-                  "builder, each with its reader sprite):", "",
-              "| model | before: tris | blocks | after: tris | blocks | estimate | ratio |", "|---|---|---|---|---|---|---|"]
-        for k, v in wk.items():
-            b, a = v.get("before"), v["after"]
-            L.append(f"| {k} | {b['triangles'] if b else '—'} | {b['blocks'] if b else '—':,} | {a['triangles']} | "
-                     f"{a['blocks']:,} | {a['estimate']:,} | "
-                     f"{(a['blocks'] / b['blocks']) if b else float('nan'):.2f}× |")
-    ab = res.get("ablations")
-    if ab:
-        L += ["", f"What each idea is worth: one thing changed at a time, geometric mean over "
-                  f"{', '.join(ab['models'])} and seeds {', '.join(map(str, ab['seeds']))}, with the grid:", "",
-              "| configuration | geomean | " + " | ".join(ab["models"]) + " | seconds |",
-              "|---|---|" + "---|" * len(ab["models"]) + "---|"]
-        for label, v in ab["variants"].items():
-            L.append(f"| {label} | {_pct(v['geomean_inflation'])} | " +
-                     " | ".join(_pct(v["models"][k]) for k in ab["models"]) + f" | {v['seconds']:.1f} |")
-    sw = res.get("search")
-    if sw:
-        for key in ("candidates", "edge_planes"):
-            cols = list(next(iter(sw[key].values())))
-            L += ["", f"Inflation and build seconds against `{key}`:", "",
-                  f"| {key} | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-            for k, row in sw[key].items():
-                L.append(f"| {k} | " + " | ".join(f"{_pct(row[c]['inflation'])}, {row[c]['seconds']:.2f}"
-                                                   for c in cols) + " |")
-    pr = res.get("proof")
-    if pr:
-        cov = sum(v["covered"] for v in pr.values())
-        inter = sum(v["interior"] for v in pr.values())
-        nontie = sum(v["mismatched"] - v["ties"] for v in pr.values())
-        L += ["", f"Proof of order on {len(pr)} models and scenes ({', '.join(pr)}), 10 cameras each at 160×120 "
-                  f"(4 for models above 50,000 triangles), half inside the bounding box, written positions: "
-                  f"{inter} interior errors, {nontie} non-tie differing pixels and "
-                  f"{sum(v['ties'] for v in pr.values())} ties of {cov:,} covered pixels."]
-    return "\n".join(L)
-
-
-def write_docs(res: dict) -> None:
-    text = DOCS.read_text("utf-8")
-    begin, end = "<!-- bench_bsp: begin (generated by benchmarks/bench_bsp.py --docs) -->", "<!-- bench_bsp: end -->"
-    block = f"{begin}\n{doc_tables(res)}\n{end}"
-    if begin in text:
-        text = re.sub(re.escape(begin) + ".*?" + re.escape(end), lambda _: block, text, flags=re.S)
-    else:
-        text = text.replace("## Proof of order", block + "\n\n## Proof of order")
-    DOCS.write_text(text, "utf-8")
-    print(f"rewrote the tables in {DOCS}")
+        b = before.get(k)
+        w = after[k].get("walk")
+        if w:
+            w["tested_all"] = w["tested"] + w["tested_two_sided"]
+            w["drawn_all"] = w["drawn"] + w["coplanar_drawn"]
+        models[k] = {"label": LABELS.get(k, k), "before": b, "after": after[k],
+                     "time_ratio": round(after[k]["seconds"] / b["seconds"], 2) if b and b["seconds"] else None,
+                     "cpu_ratio": round(after[k]["seconds_per_calibration"] / b["seconds_per_calibration"], 2)
+                     if b else None}
+    out["models"] = models
+    goal = [k for k in GOAL_SET if k in after]
+    g = {}
+    if all(k in before for k in goal):
+        gb = round(geomean(before, goal), 4)
+        ga = round(geomean(after, goal), 4)
+        g["geomean"] = {"label": "geometric mean over " + ", ".join(goal), "before": gb, "goal": round(gb / 2, 4),
+                        "goal_text": "at most half of before", "after": ga, "met": "yes" if ga <= gb / 2 else "no"}
+    for k, v in GOALS.items():
+        if k in after:
+            g[k] = {"label": LABELS.get(k, k), "before": before[k]["inflation"] if k in before else None,
+                    "goal": v, "goal_text": f"at most {v:+.0%}", "after": after[k]["inflation"],
+                    "met": "yes" if after[k]["inflation"] <= v else "no"}
+    out["goals"] = g
+    for k, v in (out.get("walks") or {}).items():
+        if isinstance(v, dict) and v.get("before"):
+            v["ratio"] = round(v["after"]["blocks"] / v["before"]["blocks"], 3)
+            v["estimate_error"] = round(v["after"]["estimate"] / v["after"]["blocks"] - 1, 4)
+    return out
 
 
 # ---------------------------------------------------------------------------- main
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="the suite table only")
-    ap.add_argument("--docs", action="store_true", help="only rewrite docs/formats-bsp.md from the JSON")
     ap.add_argument("--no-before", action="store_true", help="skip the base commit's builder")
     args = ap.parse_args()
-    if args.docs:
-        write_docs(json.loads(OUT.read_text()))
-        return
     from meshes import SUITE, corpus_file
 
     out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
@@ -413,10 +359,6 @@ def main() -> None:
                   f"{before.get(k, {}).get('seconds', float('nan')):.2f}s, after {after[k]['inflation']:+.1%} "
                   f"{after[k]['seconds']:.2f}s", flush=True)
         out["before"], out["after"] = before, after
-        goal = [k for k in GOAL_SET if k in after]
-        out["goals"] = {"models": goal, "geomean_after": round(geomean(after, goal), 4)}
-        if all(k in before for k in goal):
-            out["goals"]["geomean_before"] = round(geomean(before, goal), 4)
         if args.quick:
             _write(out)
             return
@@ -430,6 +372,7 @@ def main() -> None:
 
 
 def _write(out: dict) -> None:
+    out = finish(out)
     out["machine"]["loadavg_end"] = os.getloadavg()
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(out, indent=1))

@@ -339,7 +339,9 @@ def clean_pieces(P, A, V, cnt, nrm, step):
             cos = np.where(ln > 0, np.einsum("mc,mc->m", n, nrm) / np.maximum(ln, 1e-300), -1.0)
             q = np.where(i < cnt - 1, np.minimum(q, cos), q)
         q = np.where(r < cnt, q, -np.inf)
-        better = q > best_q
+        # a clear margin, so float noise never picks another corner for an equally good fan
+        # (a triangle's three fans are one triangle): the same input gives the same corners
+        better = q > best_q + 1e-6
         best_q[better] = q[better]
         best_r[better] = r
     rot = (k + best_r[:, None]) % np.maximum(cnt, 1)[:, None]

@@ -313,8 +313,10 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         rec.warn(f"{src.dropped} triangle(s) have zero area at the written positions (rounded to "
                  f"{10.0 ** -scene.position_decimals:g}) and were left out")
     if st["kept_whole"]:
-        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been "
-                 f"below the minimum area ({opt.min_area:g} of diagonal^2)")
+        why = f"below the minimum area ({opt.min_area:g} of diagonal^2)"
+        if scene.position_decimals is not None:
+            why += " or collapsed, flipped or tilted on the written grid"
+        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been {why}")
     rec.seconds = time.perf_counter() - t0
     return new, rec
 

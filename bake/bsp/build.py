@@ -17,6 +17,13 @@ is a leaf: the priority clusters of Schumacker et al. (a convex or a concave pie
 no edge at all). Double-sided faces add the other three facing combinations; degenerate faces
 hide nothing. Sets above ``leaf_max`` peel only the faces of their convex hull (cheap).
 
+Candidate planes of a core: face planes (sampled), *edge planes* (through an edge of one fragment
+and a corner of another: along existing edges, between the two faces of the edge), and gap/axis
+planes. Large nodes score them on a sample of their fragments and rescore the best few exactly.
+Optionally (``ensemble`` > 1) each small node is built to the end from several of its best
+planes and the cheapest subtree is grafted in. Planes equal after rounding share one offset
+(``_Builder.share``), so they share one written entry.
+
 The builder works one *level* at a time: every open node of a depth is tested, scored and split
 together with array operations (a Python loop per level and per candidate slot, never per face).
 Everything is in normalised coordinates (see ``split.py``).

@@ -75,13 +75,14 @@ t = time.perf_counter()
 for _ in range(3):
     np.sort(a); m @ m @ m
 cal = time.perf_counter() - t
-t = time.perf_counter()
+t, c0 = time.perf_counter(), time.process_time()
 new, rec = stage(scene, cfg)
-sec = time.perf_counter() - t
+sec, cpu = time.perf_counter() - t, time.process_time() - c0
 d = rec.details
 keep = ("splits", "kept_whole", "merged_triangles", "tree_depth", "record_depth", "records", "planes",
         "lists", "bytes_per_triangle", "walk", "collapsed_input_triangles", "tolerance")
 print(json.dumps({"triangles_in": scene.n_triangles, "triangles_out": new.n_triangles, "seconds": sec,
+                  "cpu_seconds": cpu,
                   "calibration_seconds": cal, "details": {k: d[k] for k in keep if k in d}}))
 '''
 
@@ -114,8 +115,10 @@ def base_checkout(tmp: Path) -> Path | None:
     return tmp
 
 
-def build(code: Path, name: str, grid: int, **opts) -> dict:
+def build(code: Path, name: str, grid: int, single_thread: bool = False, **opts) -> dict:
     env = dict(os.environ, PYTHONPATH=str(code))
+    if single_thread:  # CPU seconds comparable between runs: no BLAS threads
+        env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     r = subprocess.run([sys.executable, "-c", WORKER, str(REPO), name, str(grid), json.dumps(opts)], env=env,
                        capture_output=True, text=True, cwd=tempfile.gettempdir(), timeout=3600)
     if r.returncode:
@@ -123,6 +126,7 @@ def build(code: Path, name: str, grid: int, **opts) -> dict:
     row = json.loads(r.stdout.strip().splitlines()[-1])
     row["inflation"] = round(row["triangles_out"] / max(1, row["triangles_in"]) - 1, 4)
     row["seconds"] = round(row["seconds"], 3)
+    row["cpu_seconds"] = round(row["cpu_seconds"], 3)
     row["seconds_per_calibration"] = round(row["seconds"] / row["calibration_seconds"], 2)
     d = row.pop("details")
     lists = d.pop("lists", {})
@@ -339,7 +343,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="the suite table only")
     ap.add_argument("--no-before", action="store_true", help="skip the base commit's builder")
+    ap.add_argument("--cpu", metavar="MODELS", help="only: CPU seconds of both builders, one BLAS thread, "
+                    "alternating 3 times per model (e.g. bunny,bunny_20k); added to the JSON as 'cpu'")
     args = ap.parse_args()
+    if args.cpu:
+        cpu_only(args.cpu.split(","))
+        return
     from meshes import SUITE, corpus_file
 
     out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
@@ -369,6 +378,29 @@ def main() -> None:
                        "duck": ("duck_glb", "Duck.glb"), "house": ("house_max2obj_walls", "regr01.obj")}
         out["walks"] = run_walks(old, walk_models, Path(tmp))
     _write(out)
+
+
+def cpu_only(names) -> None:
+    """Build time as CPU seconds (one BLAS thread), before and after alternating, so a shared
+    machine's load changes both alike; the minimum of three builds each."""
+    out = json.loads(OUT.read_text()) if OUT.exists() else {}
+    res = out.setdefault("cpu", {"command": " ".join(sys.argv), "models": {}})
+    res["loadavg_start"] = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="bench-bsp-") as tmp:
+        old = base_checkout(Path(tmp) / "base")
+        if old is None:
+            raise SystemExit(f"base commit {BASE_COMMIT} not available")
+        for k in names:
+            b, a = [], []
+            for _ in range(3):
+                b.append(build(old, k, 0, single_thread=True)["cpu_seconds"])
+                a.append(build(REPO, k, 5, single_thread=True)["cpu_seconds"])
+            res["models"][k] = {"before": min(b), "after": min(a), "ratio": round(min(a) / min(b), 2),
+                                "before_all": b, "after_all": a}
+            print(f"cpu {k}: before {min(b):.2f}s after {min(a):.2f}s ratio {min(a) / min(b):.2f}", flush=True)
+    res["loadavg_end"] = os.getloadavg()
+    OUT.write_text(json.dumps(out, indent=1))
+    print(f"wrote {OUT}")
 
 
 def _write(out: dict) -> None:

@@ -6,6 +6,7 @@
     bake report OUT_DIR [--width N]
     bake check PROJECT.sb3 [--json] [--strict]
     bake sweep MODEL|CONFIG --vary KEY=V1,V2,... [--out DIR]
+    bake watch MODEL|CONFIG [--set key=value ...] [--out DIR]
     bake keys
 
 Exit statuses: see bake/errors.py (0 ok, 1 internal error, 2 config/usage, 3 bad input,
@@ -28,30 +29,8 @@ from .errors import BakeError, ConfigError, InputError, LimitError
 
 
 # --------------------------------------------------------------------------- progress
-class _Progress:
-    """Stage progress on stderr: a rich status line on a terminal, nothing otherwise."""
-
-    def __init__(self, quiet: bool):
-        self.enabled = not quiet and sys.stderr.isatty()
-        self._status = None
-        if self.enabled:
-            from rich.console import Console
-            self._console = Console(stderr=True)
-
-    def __call__(self, stage: str, event: str) -> None:
-        if not self.enabled:
-            return
-        if event == "start":
-            if self._status is None:
-                self._status = self._console.status(f"bake: {stage} ...")
-                self._status.start()
-            else:
-                self._status.update(f"bake: {stage} ...")
-
-    def stop(self) -> None:
-        if self._status is not None:
-            self._status.stop()
-            self._status = None
+# A per-stage bar on stderr for bakes longer than 2 s, on a terminal only (bake/progress.py).
+from .progress import StageProgress as _Progress, stage_count as _stage_count  # noqa: E402
 
 
 def _default_out(target: Path) -> Path:
@@ -87,8 +66,9 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
 
     output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
     _check_into(cfg)
-    prog = _Progress(quiet)
+    prog = _Progress(quiet, total=_stage_count(cfg))
     cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
+    cfg.cache.out_dir = out  # and so does the default stage cache
     try:
         result = pipeline.run(cfg, progress=prog)
         if prog.enabled:
@@ -247,6 +227,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}")
         reference = rvals[0]
     out_dir = Path(args.out) if args.out else _default_out(target)
+    cfg.cache.out_dir = out_dir  # the sweep reuses (and fills) the bake's stage cache
     out = out_dir / "sweeps" / key
     from .export import output
 
@@ -390,6 +371,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 # Commands contributed by other modules: functions (subparsers, common) -> None.
 _EXTRA_COMMANDS: list[Callable[[Any, Callable], None]] = []
+
+
+# --------------------------------------------------------------------------- watch
+def cmd_watch(args: argparse.Namespace) -> int:
+    from . import watch
+
+    target = Path(args.target)
+    if not target.exists():
+        raise InputError("file not found", path=target)
+    out = Path(args.out) if args.out else _default_out(target)
+    return watch.watch(target, args.set, out, quiet=args.quiet, debug=getattr(args, "debug", False),
+                       debounce=args.debounce)
+
+
+def _add_watch(sub: Any, common: Callable) -> None:
+    w = sub.add_parser("watch", help="bake, then bake again whenever the model, its files or the config change")
+    w.add_argument("target", help="a model (.obj/.gltf/.glb) or a config (.toml)")
+    w.add_argument("--out", help="output folder (default: bake-out/<name>)")
+    w.add_argument("--debounce", type=float, default=0.1, metavar="SECONDS",
+                   help="wait this long after the last change before baking (default 0.1)")
+    common(w)
+    w.set_defaults(func=cmd_watch)
+
+
+_EXTRA_COMMANDS.append(_add_watch)
 
 
 class Terminated(KeyboardInterrupt):

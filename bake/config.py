@@ -323,6 +323,7 @@ class ListNames:
     two_sided: str = "mat two-sided"
     quads: str = "quads"
     ngons: str = "ngons"
+    packed: str = "packed lists"  # with export.pack: the packed texts the loader decodes
 
 
 @dataclass
@@ -347,7 +348,18 @@ class ExportConfig:
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
     # bake.scratch.numbers.position_decimals, the grid the BSP builds on too).
     precision: int = 5
+    # Vertex numbering: "first-use" = in the order the written triangles first use them (the
+    # index lists then pack to a symbol or two per corner); "scene" = the scene's order.
+    vertex_order: Literal["first-use", "scene"] = "first-use"
     color_format: Literal["rgb", "argb", "hex"] = "rgb"
+    # Packed lists (docs/formats.md "Packed lists"): in the .sb3/.sprite3/export.into project the
+    # numeric lists are stored as short strings in the list `names.packed`, and loader blocks in
+    # the reader sprite rebuild exactly the plain lists at the green flag (list files and
+    # lists.json stay plain). A list is packed only when that is smaller, and when it decodes to
+    # at most pack_max_items items (vanilla Scratch's `add to list` stops at 200,000; 0 = no
+    # limit, for TurboWarp).
+    pack: bool = False
+    pack_max_items: int = 200_000
     names: ListNames = field(default_factory=ListNames)
     txt: bool = True
     json: bool = True
@@ -377,6 +389,18 @@ class ReportConfig:
 
 
 @dataclass
+class CacheConfig:
+    """The stage cache (bake/cache.py): each stage's output, keyed by everything it depends on."""
+
+    # "" = <output folder>/.bake-cache/stages; a path (relative to this config file) = one cache
+    # shared between bakes; "none" = no cache.
+    dir: str = ""
+    max_mb: float = 1024.0  # size cap in MiB: past it the least recently used entries are deleted
+    # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
+    out_dir: Path | None = field(default=None, metadata={"internal": True})
+
+
+@dataclass
 class Config:
     input: InputConfig = field(default_factory=InputConfig)
     import_: ImportConfig = field(default_factory=ImportConfig)
@@ -388,6 +412,7 @@ class Config:
     textures: TexturesConfig = field(default_factory=TexturesConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
+    cache: CacheConfig = field(default_factory=CacheConfig)
     # Where the config came from (not a TOML key): paths in it are relative to this folder.
     base_dir: Path = field(default_factory=Path.cwd, metadata={"internal": True})
     source: Path | None = field(default=None, metadata={"internal": True})
@@ -880,6 +905,7 @@ def validate(cfg: Config) -> None:
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
     need(cfg.mesh.clean.weld_tolerance >= 0, "mesh.clean.weld_tolerance", "must be >= 0")
     need(1 <= cfg.export.precision <= 15, "export.precision", "must be between 1 and 15")
+    need(cfg.export.pack_max_items >= 0, "export.pack_max_items", "must be >= 0 (0 = no limit)")
     need(16 <= cfg.report.preview_width <= 2048, "report.preview_width", "must be between 16 and 2048")
     s = cfg.mesh.simplify
     need(s.target_triangles >= 0, "mesh.simplify.target_triangles", "must be >= 0")
@@ -908,6 +934,7 @@ def validate(cfg: Config) -> None:
     need(cfg.bsp.score_refine >= 1, "bsp.score_refine", "must be >= 1")
     need(cfg.bsp.ensemble >= 1, "bsp.ensemble", "must be >= 1 (1 = off)")
     need(cfg.bsp.ensemble_max >= 0, "bsp.ensemble_max", "must be >= 0")
+    need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
     sb3_name = cfg.export.sb3_name

@@ -7,11 +7,12 @@ by ``<section>.enabled``; the report says for every stage whether it ran and, if
 
 from __future__ import annotations
 
+import copy
 import importlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Collection
 
 import numpy as np
 
@@ -113,24 +114,85 @@ class BakeResult:
     skipped: list[dict[str, Any]]
     seconds: float
     config: Config
+    # the stage cache's part in this bake (None without a cache): where it is, which stages came
+    # from it, which were stored, its warnings
+    cache: dict[str, Any] | None = None
+    # entries waiting for the outputs to be written (a first bake into a new folder): finish_cache
+    cache_session: Any = None
 
 
-Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done")
+def finish_cache(result: BakeResult) -> None:
+    """Write the stage cache entries a bake kept back until its outputs were written."""
+    if result.cache_session is not None:
+        result.cache_session.finish()
+        result.cache_session = None
+
+
+Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done" | "cached")
 
 
 def run(cfg: Config, *, progress: Progress | None = None, until: str | None = None,
-        scene: Scene | None = None, observe: Callable[[str, Scene], None] | None = None) -> BakeResult:
+        scene: Scene | None = None, observe: Callable[[str, Scene], None] | None = None,
+        cache: Any = "auto", recompute: Collection[str] = ()) -> BakeResult:
     """Run every stage the config calls for. ``until`` stops after the named stage; ``observe``
     is called with each stage's name and output scene (``bake sweep`` compares the lighting
-    stage's colours before later stages split triangles)."""
+    stage's colours before later stages split triangles).
+
+    ``cache``: ``"auto"`` = the stage cache the config names (``cache.dir``, or the output folder's
+    when ``cache.out_dir`` is set; ``bake.cache.StageCache.for_config``), a ``StageCache``, or None.
+    The bake loads the entry of the deepest stage whose key is unchanged and runs the stages after
+    it; ``observe`` then sees the loaded stage's scene, not those of the stages before it. Stages
+    named in ``recompute`` and every stage after the first of them always run and are not stored
+    (``bake sweep`` times them). A bake from a given ``scene`` uses no cache."""
+    from . import cache as cache_mod
+
     t0 = time.perf_counter()
     records: list[StageRecord] = []
+    cold: list[StageRecord] = []  # the records as computed (what entries store)
     skipped: list[dict[str, Any]] = []
-    scene = scene if scene is not None else Scene()
+    active: list[StageSpec] = []
     for spec, on, reason in plan(cfg):
         if not on:
             skipped.append({"name": spec.name, "ran": False, "reason": reason})
             continue
+        active.append(spec)
+        if until == spec.name:
+            break
+    if scene is not None:
+        cache = None
+    elif cache == "auto":
+        cache = cache_mod.StageCache.for_config(cfg)
+    scene = scene if scene is not None else Scene()
+    limit = next((i for i, spec in enumerate(active) if spec.name in recompute), len(active))
+    session = cache.session() if cache is not None else None
+    sections = [spec.section(cfg) for spec in active]
+    info: dict[str, Any] | None = None
+    start, prev_key, covered = 0, None, frozenset()
+    pending: list[str] = []  # cache warnings for the next record
+    if session is not None:
+        info = {"where": cache.store.describe(), "from_cache": [], "stored": [], "warnings": session.warnings}
+        steps = session.plan([(spec.name, sec) for spec, sec in zip(active, sections)])
+        hit = session.load_deepest(steps, limit)
+        pending = list(session.warnings)
+        if hit is not None:
+            start = hit.index + 1
+            prev_key, covered = steps[hit.index].key, steps[hit.index].covered
+            scene = hit.scene
+            cold = list(hit.records)
+            for k, rec in enumerate(hit.records):
+                shown = _from_cache(rec, hit.seconds if k == hit.index else 0.0)
+                # advice reads the config beyond the stage's section (the import's warning about
+                # textures.enabled): given again for this bake's config
+                advice.after_stage(rec.name, cfg, scene, shown, records)
+                records.append(shown)
+                if progress:
+                    progress(rec.name, "cached")
+            info["from_cache"] = [r.name for r in hit.records]
+            info["load_seconds"] = hit.seconds
+            if observe is not None:
+                observe(active[hit.index].name, scene)
+    for i in range(start, len(active)):
+        spec = active[i]
         fn = spec.load()
         if spec.name in GRID_USERS:
             scene = with_grid(scene, cfg)
@@ -139,7 +201,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         counts_in = counts(scene)
         t = time.perf_counter()
         try:
-            scene, rec = fn(scene, spec.section(cfg))
+            scene, rec = fn(scene, sections[i])
         except ConfigError as e:
             raise _in_config_file(e, cfg) from None
         except BakeError:
@@ -156,16 +218,41 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             rec.counts_in = counts_in
         if not rec.counts_out:
             rec.counts_out = counts(scene)
+        cold.append(copy.deepcopy(rec))  # as computed: what the cache stores (advice is added per bake)
         advice.after_stage(spec.name, cfg, scene, rec, records)
+        for w in pending:
+            rec.warn(w)
+        pending = []
         records.append(rec)
+        if session is not None and i < limit:
+            base = session.base(prev_key, spec.name, sections[i])
+            prev_key, covered, warning = session.store_stage(spec.name, base, covered, scene, cold)
+            if warning:
+                rec.warn(warning)
+                session.warnings.append(warning)
         if observe is not None:
             observe(spec.name, scene)
         if progress:
             progress(spec.name, "done")
-        if until == spec.name:
-            break
+    later = None
+    if session is not None:
+        if session.deferred():  # a new output folder: written once the outputs are (output.finish)
+            later = session
+        else:
+            info["dropped"] = len(session.finish())
+        info["stored"] = list(session.stored)
     return BakeResult(scene=scene, records=records, skipped=skipped,
-                      seconds=time.perf_counter() - t0, config=cfg)
+                      seconds=time.perf_counter() - t0, config=cfg, cache=info, cache_session=later)
+
+
+def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:
+    """A record loaded from the cache, as this bake reports it: the time this bake spent on it
+    (loading the entry, or nothing for the stages before the loaded one) and, in
+    ``details["cache"]``, that it came from the cache and how long computing it took."""
+    out = copy.deepcopy(rec)
+    out.details["cache"] = {"from_cache": True, "computed_seconds": round(float(rec.seconds), 6)}
+    out.seconds = seconds
+    return out
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:

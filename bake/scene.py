@@ -90,6 +90,10 @@ class ScratchList:
     doc: str = ""
     kind: str = "number"  # "number" | "int" | "string"
     decimals: int | None = None  # decimals after the point for floats (None: shortest repr)
+    # The list's shape for packing (export.pack): ``pack_prefix`` items (e.g. a header) and then
+    # records of ``pack_stride`` items (0 = ``stride``); a list of variable-length records leaves both 0.
+    pack_prefix: int = 0
+    pack_stride: int = 0
 
 
 @dataclass(frozen=True)

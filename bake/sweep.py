@@ -24,6 +24,13 @@ API::
 
 ``scene=`` bakes a given :class:`~bake.scene.Scene` with the lighting stage alone (no import,
 no export: lighting keys only), for tests and for sweeping before a model is on disk.
+
+Stage reuse: the stages before the key's stage do not change from row to row, so every bake after
+the first loads them from the stage cache (bake/cache.py): the bake's folder cache when it has one
+(``bake sweep`` uses ``OUT/.bake-cache/stages``, so a sweep after ``bake run`` does not even
+compute them once), else one in memory for the sweep. The key's stage and every stage after it
+always run (their seconds are the point of the sweep) and are not stored. ``cache=None`` bakes
+every row from scratch.
 """
 
 from __future__ import annotations
@@ -55,7 +62,9 @@ STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
 ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
                   "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
                   "bsp": ("inflation", "triangles added by splits (fraction of the input)"),
-                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)")}
+                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)"),
+                  "export": ("position_error", "largest position rounding error, fraction of the diagonal "
+                                               "(a bound: half the rounding step)")}
 IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1)")
 PREVIEW_SIZE = (160, 120)
 
@@ -128,10 +137,12 @@ class _Run:
     lists: dict | None = None  # what the export wrote (lists.json), None without export
     report: dict | None = None  # report.json's shape (config, materials) for the previews
     final: Scene | None = None  # the scene after the last stage (else ``scene``)
+    cached: list[str] | None = None  # stages loaded from the stage cache
 
 
-def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
-    """One bake: the lighting stage alone on ``scene``, or the whole pipeline."""
+def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -> _Run:
+    """One bake: the lighting stage alone on ``scene``, or the whole pipeline (the stages before
+    the key's from ``stage_cache`` when it has them)."""
     t0 = time.perf_counter()
     if scene is not None:
         from .lighting.stage import stage
@@ -145,7 +156,8 @@ def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
     from .pipeline import run
 
     seen: dict[str, Scene] = {}
-    res = run(cfg, observe=lambda name, sc: seen.__setitem__(name, sc) if name == "lighting" else None)
+    res = run(cfg, observe=lambda name, sc: seen.__setitem__(name, sc) if name == "lighting" else None,
+              cache=stage_cache, recompute=stages_for(key))
     total = time.perf_counter() - t0
     recs = {r.name: r.to_json() for r in res.records}
     stages = stages_for(key)
@@ -161,7 +173,8 @@ def _bake(cfg: Config, scene: Scene | None, key: str) -> _Run:
         lists = json.loads(outputs[cfg.export.json_name]).get("lists", {})
     # the lighting stage's scene: its colours line up with the lighting artefact (a BSP splits later)
     return _Run(seen.get("lighting", res.scene), recs, sum(recs[n]["seconds"] for n in ran) if ran else total,
-                total, lists, report_mod.build(res), final=res.scene)
+                total, lists, report_mod.build(res), final=res.scene,
+                cached=list((res.cache or {}).get("from_cache", [])))
 
 
 def _mesh(run: _Run):
@@ -256,12 +269,14 @@ def compare(run: dict, ref: dict) -> dict[str, Any]:
 
 def sweep(config: str | Path | Config, key: str, values: Sequence[float], reference: Any = None, *,
           scene: Scene | None = None, out: str | Path | None = None,
-          progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+          progress: Callable[[str], None] | None = None, cache: Any = "auto") -> dict[str, Any]:
     """Bake once per value of ``key`` and compare each bake with a reference.
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
     value (not a row); a :class:`Scene` = a lighting bake made elsewhere. ``out`` (a path without
-    suffix) writes ``out.json`` and ``out.png``. Returns the table (JSON-serialisable)."""
+    suffix) writes ``out.json`` and ``out.png``. ``cache``: ``"auto"`` = the config's stage cache
+    (``StageCache.for_config``) or one in memory, a ``StageCache``, or None (no reuse). Returns the
+    table (JSON-serialisable)."""
     base = _load(config)
     config_mod.get_key(base, key)  # unknown key -> ConfigError
     if not stages_for(key):
@@ -269,14 +284,23 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     vals = sorted(dict.fromkeys(values), key=float)
     if not vals:
         raise ConfigError("sweep needs at least one value", key=key)
+    stage_cache = None
+    if scene is None and cache is not None:
+        from . import cache as cache_mod
+
+        stage_cache = cache_mod.StageCache.for_config(base) if cache == "auto" else cache
+        stage_cache = stage_cache or cache_mod.StageCache.in_memory()
     say = progress or (lambda _msg: None)
     if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
-        say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries)")
-        _bake(_with_value(base, key, vals[0]), scene, key)
+        say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries"
+            + (" and stores the stages before the key's)" if stage_cache is not None else ")"))
+        _bake(_with_value(base, key, vals[0]), scene, key, stage_cache)
     runs = {}
     for i, v in enumerate(vals, 1):  # one bake per value
         say(f"bake {i}/{len(vals)}: {key} = {v}")
-        runs[v] = _bake(_with_value(base, key, v), scene, key)
+        runs[v] = _bake(_with_value(base, key, v), scene, key, stage_cache)
+    if stage_cache is not None:  # what a new folder's cache kept back: the sweep's bakes succeeded
+        stage_cache.store.flush()
     ref_desc: dict[str, Any]
     ref_run: _Run | None = None
     if reference is None:
@@ -286,7 +310,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         ref_desc = {"kind": "scene"}
     else:
         say(f"reference bake at {key} = {reference}")
-        ref_run = _bake(_with_value(base, key, reference), scene, key)
+        ref_run = _bake(_with_value(base, key, reference), scene, key, stage_cache)
         ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
                     "total_seconds": round(ref_run.total, 6)}
     ref_colors = _colors(reference if isinstance(reference, Scene) else ref_run.scene)
@@ -312,6 +336,10 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     err_key, err_label = error_of(key)
     table = {"key": key, "values": list(vals), "stages": list(stages_for(key)), "reference": ref_desc,
              "rows": rows, "error_metric": err_label, "error_key": err_key, "slope": _slope(rows),
+             "cache": None if stage_cache is None else {
+                 "where": stage_cache.store.describe(),
+                 "note": "the stages before the key's are baked once and loaded from the stage cache after that "
+                         "(cached_stages per row); total_seconds counts loading them, not computing them"},
              "metric": "error: " + err_label + "; image_rmse: depth-buffer previews of the written lists "
                        f"({PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, 3 views) against the reference's; rmse / max "
                        "error of shown colours (0..1, RGB) over traced vertices (or triangles); irradiance is linear"}
@@ -342,6 +370,7 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
         "rays": int(sum(e.get("rays", 0) or 0 for e in effects)),
         "reported_error": {e["name"]: e["error"] for e in effects if "error" in e},
         "effect_seconds": {e["name"]: e.get("seconds") for e in effects},
+        "cached_stages": list(run.cached or []),
     }
 
 

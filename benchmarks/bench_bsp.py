@@ -277,9 +277,16 @@ def run_walks(old: Path | None, models: dict, tmp: Path) -> dict:
             if r.returncode:
                 raise SystemExit(f"bake of {name} ({who}) failed:\n{r.stderr[-3000:]}")
             info = json.loads(r.stdout.strip().splitlines()[-1])
-            jobs.append({"load": str(p), "runs": [{"call": {"target": "Mesh", "proccode": "bsp walk %s %s %s",
-                                                            "args": [repr(float(x)) for x in info["eye"]]},
-                                                   "read": {"lists": ["draw order"]}}]})
+            if who == "before":  # the base commit's reader: record format 1, the eye as arguments
+                run = {"call": {"target": "Mesh", "proccode": "bsp walk %s %s %s",
+                                "args": [repr(float(x)) for x in info["eye"]]}, "read": {"lists": ["draw order"]}}
+            else:  # format 2: the eye in the camera variables, ranges out
+                run = {"call": {"target": "Mesh", "proccode": "bsp walk", "args": []},
+                       "read": {"lists": ["draw ranges"]},
+                       "set": {"target": "Mesh", "variables": {"cam x": repr(float(info["eye"][0])),
+                                                               "cam y": repr(float(info["eye"][1])),
+                                                               "cam z": repr(float(info["eye"][2]))}}}
+            jobs.append({"load": str(p), "runs": [run]})
             meta.append((name, who, info))
     r = subprocess.run(["node", str(REPO / "vm" / "run.js"), "--plan", "-"], input=json.dumps({"jobs": jobs}),
                        capture_output=True, text=True, timeout=7200, cwd=str(REPO))
@@ -287,12 +294,15 @@ def run_walks(old: Path | None, models: dict, tmp: Path) -> dict:
     out: dict = {}
     for (name, who, info), job in zip(meta, res):
         run = job["runs"][0]
-        row = {"triangles": info["triangles"], "blocks": run["blocks"], "ms": round(run["ms"], 1),
-               "drawn": len(run["lists"]["draw order"])}
+        row = {"triangles": info["triangles"], "blocks": run["blocks"], "ms": round(run["ms"], 1)}
+        if who == "before":
+            row["drawn"] = len(run["lists"]["draw order"])  # triangles, culled by the walk
+        else:
+            row["ranges"] = len(run["lists"]["draw ranges"]) // 2  # (first, n) pairs; the filler culls
         if who == "after":
             row["estimate"] = info["estimate"]
         out.setdefault(name, {})[who] = row
-        print(f"walk {name} {who}: {run['blocks']:,} blocks, {row['drawn']} drawn", flush=True)
+        print(f"walk {name} {who}: {run['blocks']:,} blocks", flush=True)
     return out
 
 
@@ -309,10 +319,6 @@ def finish(out: dict) -> dict:
         if k not in after:
             continue
         b = before.get(k)
-        w = after[k].get("walk")
-        if w:
-            w["tested_all"] = w["tested"] + w["tested_two_sided"]
-            w["drawn_all"] = w["drawn"] + w["coplanar_drawn"]
         models[k] = {"label": LABELS.get(k, k), "before": b, "after": after[k],
                      "time_ratio": round(after[k]["seconds"] / b["seconds"], 2) if b and b["seconds"] else None,
                      "cpu_ratio": round(after[k]["seconds_per_calibration"] / b["seconds_per_calibration"], 2)

@@ -42,7 +42,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from bake import config, pipeline  # noqa: E402
-from bake.bsp.traverse import draw_order  # noqa: E402
+from bake.bsp.traverse import draw_ranges  # noqa: E402
 from bake.bvh.traverse import trace_one  # noqa: E402
 from bake.scratch import sb3  # noqa: E402
 from bake.scratch import readers  # noqa: E402
@@ -154,12 +154,12 @@ def main() -> None:
                 runs.append({"call": {"target": "Mesh", "proccode": "project vertices", "args": []},
                              "read": {"variables": []}})
                 runs.append({"call": {"target": "Mesh", "proccode": "render", "args": []},
-                             "read": {"lists": ["draw order"]}, "pen": True})
+                             "read": {"lists": ["draw ranges"]}, "pen": True})
                 if spec.bsp is not None:
                     eyes = bsp_eyes(lists[spec.mesh.verts], cam)
-                    runs += [{"call": {"target": "Mesh", "proccode": "bsp walk %s %s %s",
-                                       "args": [repr(float(x)) for x in e]},
-                              "read": {"lists": ["draw order"]}} for e in eyes]
+                    runs += [{"set": {"target": "Mesh", "variables": {"cam x": e[0], "cam y": e[1], "cam z": e[2]}},
+                              "call": {"target": "Mesh", "proccode": "bsp walk", "args": []},
+                              "read": {"lists": ["draw ranges"]}} for e in eyes]
             jobs.append({"load": str(p), "runs": runs})
             enc = res.scene.artefacts["bvh"]["encoded"]
             enc = dataclasses.replace(enc, nodes=np.asarray(lists[spec.bvh.nodes], np.float64),
@@ -169,9 +169,8 @@ def main() -> None:
             meta.append({"model": name, "layout": layout, "bits": bits if layout == "quantised" else None,
                          "triangles": res.scene.n_triangles, "vertices": res.scene.n_vertices,
                          "rays": len(rays), "ref": ref, "render": first, "eyes": eyes,
-                         "bsp_ref": [draw_order(lists[spec.bsp.nodes], lists[spec.bsp.planes], e, lists["tris"],
-                                                lists["verts"], [bool(x) for x in spec.bsp.two_sided])
-                                     for e in eyes] if eyes else [],
+                         "bsp_ref": [[x for r in draw_ranges(lists[spec.bsp.nodes], lists[spec.bsp.planes], e)
+                                      for x in r] for e in eyes] if eyes else [],
                          "bsp_items": (len(lists[spec.bsp.nodes]), len(lists[spec.bsp.planes])) if spec.bsp else None,
                          "bsp": "bsp" in res.scene.artefacts,
                          "project_json_bytes": sb3.archive_sizes(files[sb3_name])["project_json_bytes"]})
@@ -181,7 +180,7 @@ def main() -> None:
     if cand.exists():
         tex = images.prepare_texture(cand, size=(64, 64))
         text = textimage.encode(tex[:, :, :3])
-        spec = readers.ReaderSpec(mesh=None, bvh=None, textimage=True)
+        spec = readers.ReaderSpec(mesh=None, bvh=None, textimage=True)  # the decoder alone
         data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True), readers.reader_target(spec, "Reader")])
         p = tmp / "ti.sb3"
         p.write_bytes(data)
@@ -222,8 +221,8 @@ def main() -> None:
                 "node_items": m["bsp_items"][0], "plane_items": m["bsp_items"][1],
                 "blocks_per_walk": stats([w["blocks"] for w in walks]),
                 "ms_per_walk": stats([w["ms"] for w in walks]),
-                "drawn_per_walk": stats([len(w["lists"]["draw order"]) for w in walks]),
-                "mismatches_vs_reference": sum(int([int(x) for x in w["lists"]["draw order"]] != ref)
+                "ranges_per_walk": stats([len(w["lists"]["draw ranges"]) // 2 for w in walks]),
+                "mismatches_vs_reference": sum(int([int(x) for x in w["lists"]["draw ranges"]] != ref)
                                                for w, ref in zip(walks, m["bsp_ref"]))})
         if m["render"]:
             proj, frame = runs[m["rays"]], runs[m["rays"] + 1]
@@ -231,7 +230,7 @@ def main() -> None:
                 "model": m["model"], "triangles": m["triangles"], "vertices": m["vertices"],
                 "project_vertices_blocks": proj["blocks"], "frame_blocks": frame["blocks"],
                 "frame_ms": frame["ms"], "pen_strokes": len(frame.get("pen", [])),
-                "drawn": len(frame["lists"]["draw order"]),
+                "ranges": len(frame["lists"]["draw ranges"]) // 2,
                 "draw_order": "BSP walk" if m["bsp"] else "list order (no BSP in this bake)"})
     if ti_runs:
         r = out[-1]["runs"][0]
@@ -254,19 +253,19 @@ def main() -> None:
               f"{b['blocks_per_miss_ray']['mean']:.0f} | {b['reference_items_read_per_ray']['mean']:.0f} | "
               f"{b['hit_rate']:.2f} | {b['ms_per_ray']['mean']:.2f} | {b['mismatches_vs_reference']} |")
     print("\n| model | tris (after BSP splits) | BSP walk blocks/frame mean | max | ms/walk (vanilla VM) | "
-          "triangles drawn | node + plane items | mismatches |")
+          "ranges drawn | node + plane items | mismatches |")
     print("|---|---|---|---|---|---|---|---|")
     for b in results["bsp"]:
         print(f"| {b['model']} | {b['triangles']} | {b['blocks_per_walk']['mean']:.0f} | "
               f"{b['blocks_per_walk']['max']:.0f} | {b['ms_per_walk']['mean']:.0f} | "
-              f"{b['drawn_per_walk']['mean']:.0f} | {b['node_items']} + {b['plane_items']} | "
+              f"{b['ranges_per_walk']['mean']:.0f} | {b['node_items']} + {b['plane_items']} | "
               f"{b['mismatches_vs_reference']} |")
     print("\n| model | tris | verts | project vertices (blocks) | render frame (blocks) | frame ms (vanilla VM) | "
-          "pen strokes | drawn | order |")
+          "pen strokes | ranges | order |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in results["render"]:
         print(f"| {r['model']} | {r['triangles']} | {r['vertices']} | {r['project_vertices_blocks']} | "
-              f"{r['frame_blocks']} | {r['frame_ms']:.0f} | {r['pen_strokes']} | {r['drawn']} | {r['draw_order']} |")
+              f"{r['frame_blocks']} | {r['frame_ms']:.0f} | {r['pen_strokes']} | {r['ranges']} | {r['draw_order']} |")
     for t in results["textimage"]:
         print(f"\nTextImage decode, {t['image']}: {t['blocks']} blocks ({t['blocks_per_pixel']:.1f} per pixel), "
               f"{t['ms']:.0f} ms")

@@ -153,7 +153,7 @@ def test_sweep_error_of_keys():
     assert error_of("lighting.ao.samples")[0] == "rmse"
     assert error_of("bsp.candidates")[0] == "inflation"
     for key in config_mod.numeric_keys():  # every numeric key of the bake belongs to a stage
-        assert stages_for(key) or key.startswith("report."), key
+        assert stages_for(key) or key.startswith(("report.", "cache.")), key
     with pytest.raises(ConfigError, match="does not change what is baked"):
         sweep(_cfg(), "report.preview_width", [100, 200])
 

@@ -14,6 +14,8 @@
  *   { "projects": [ {"file": "x.sb3", "id": "x"} ],     // id names the snapshots (default: file stem)
  *     "modes": ["compiled", "interpreted"],            // TurboWarp's compiler on / off
  *     "repeat": 1,                                     // runs per project and mode
+ *     "interleave": false,                             // true: every page open at once, round k runs
+ *                                                      //   each once (timings side by side)
  *     "action": {"greenFlag": true}                    // or {"call": {"target": "Mesh",
  *                                                      //   "proccode": "render", "args": []}}
  *     "snapshots": "DIR",                              // <id>-<mode>.png after the last run (optional)
@@ -37,9 +39,11 @@
  *
  * How (facts that hold for @turbowarp/packager 3.13.0):
  * - The .sb3 is packaged into one self-contained HTML page with the packager's Node API (its
- *   scaffolding ships inside the npm package, so no network: only an .sb3 missing an asset would
- *   make the page ask the asset server). Cloud variables are local; every request that is not a
- *   file:, data: or blob: URL is blocked and reported as an error, and DNS resolves nothing.
+ *   scaffolding ships inside the npm package, so no network). An .sb3 missing an asset would make
+ *   the packager download it: such a file is refused before packaging and reported ("packaging:
+ *   asset missing from the archive"), as is anything that is not a zip. In the page, cloud
+ *   variables are local; every request that is not a file:, data: or blob: URL is blocked and
+ *   reported as an error, and DNS resolves nothing.
  * - Debian's chromium runs headless with --use-angle=swiftshader --enable-unsafe-swiftshader (WebGL
  *   on the CPU), a 480x360 viewport at device scale 1, so the stage canvas has the stage's pixels.
  * - The page's frame loop is started (vm.start()) and the green flag pressed with vm.greenFlag();
@@ -82,8 +86,34 @@ function findChromium (given) {
 }
 
 // ------------------------------------------------------------------ packaging
+/* An .sb3 whose project.json names an asset the archive lacks would make the packager download it
+ * from the asset server: refuse it here, so the harness never goes to the network. */
+async function missingAssets (data) {
+    const JSZip = require('@turbowarp/jszip');
+    let zip;
+    try {
+        zip = await JSZip.loadAsync(data);
+    } catch (e) {
+        throw new Error('not an .sb3 (zip) archive');
+    }
+    const pj = zip.file('project.json');
+    if (!pj) throw new Error('no project.json in the archive');
+    const project = JSON.parse(await pj.async('string'));
+    const names = new Set(Object.keys(zip.files).map(n => n.replace(/^.*\//, '')));
+    const missing = [];
+    for (const t of project.targets || []) {
+        for (const a of [...(t.costumes || []), ...(t.sounds || [])]) {
+            const name = a.md5ext || `${a.assetId}.${a.dataFormat}`;
+            if (!names.has(name)) missing.push(name);
+        }
+    }
+    return missing;
+}
+
 async function packageProject (file, cacheDir) {
     const data = fs.readFileSync(file);
+    const missing = await missingAssets(data);
+    if (missing.length) throw new Error(`asset missing from the archive (not fetched): ${missing.join(', ')}`);
     const key = crypto.createHash('sha256').update(data).update(readVersion('@turbowarp/packager') || '')
         .digest('hex').slice(0, 24);
     const out = path.join(cacheDir, `${key}.html`);
@@ -207,11 +237,13 @@ async function waitFor (page, fn, timeoutMs, what, arg) {
     }
 }
 
-async function runOne (browser, html, proj, mode, plan, baseDir) {
+// a project in a mode: open (load, set up), run the action once, finish (read, snapshot, close)
+async function openOne (browser, html, proj, mode, plan) {
     const res = {id: proj.id, file: proj.file, mode, runs: [], snapshot: null, stage: null, lists: {}, variables: {},
         errors: []};
-    const page = await browser.newPage();
+    const one = {res, page: null, broken: false};
     try {
+        const page = one.page = await browser.newPage();
         await page.setViewport({width: 480, height: 360, deviceScaleFactor: 1});
         page.on('console', msg => {
             if (msg.type() === 'error') res.errors.push(`console error: ${msg.text()}`);
@@ -231,37 +263,61 @@ async function runOne (browser, html, proj, mode, plan, baseDir) {
         await waitFor(page, pageLoaded, timeout, 'loading the project');
         await page.evaluate(pageSetup, mode === 'compiled');
         await sleep(100); // a few idle frames
-        const action = plan.action || {greenFlag: true};
-        const repeat = Math.max(1, plan.repeat || 1);
-        for (let k = 0; k < repeat; k++) {
-            await page.evaluate(pageStart, action);
-            const t0 = Date.now();
-            let st;
-            for (;;) {
-                st = await page.evaluate(pageStatus);
-                if (st.done || Date.now() - t0 > timeout) break;
-                await sleep(st.ms > 2000 ? 50 : 5);
-            }
-            res.runs.push({seconds: st.ms / 1000, stepSeconds: st.stepMs / 1000, steps: st.steps, done: st.done,
-                running: st.running});
-            if (!st.done) break;
-            await sleep(40);
+    } catch (e) {
+        res.errors.push(`harness: ${e && e.message ? e.message : String(e)}`);
+        one.broken = true;
+    }
+    return one;
+}
+
+async function runOnce (one, plan) {
+    if (one.broken) return;
+    const res = one.res;
+    try {
+        const timeout = plan.timeoutMs || 120000;
+        await one.page.bringToFront(); // a page in the background runs at a lower priority
+        await sleep(40);
+        await one.page.evaluate(pageStart, plan.action || {greenFlag: true});
+        const t0 = Date.now();
+        let st;
+        for (;;) {
+            st = await one.page.evaluate(pageStatus);
+            if (st.done || Date.now() - t0 > timeout) break;
+            await sleep(st.ms > 2000 ? 50 : 5);
         }
-        if (plan.read) Object.assign(res, await page.evaluate(pageRead, plan.read));
-        const url = await page.evaluate(pageSnapshot);
-        const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
-        res.stage = [png.readUInt32BE(16), png.readUInt32BE(20)];
-        if (plan.snapshots) {
-            const dir = path.resolve(baseDir, plan.snapshots);
-            fs.mkdirSync(dir, {recursive: true});
-            const file = path.join(dir, `${proj.id}-${mode}.png`);
-            fs.writeFileSync(file, png);
-            res.snapshot = file;
+        res.runs.push({seconds: st.ms / 1000, stepSeconds: st.stepMs / 1000, steps: st.steps, done: st.done,
+            running: st.running});
+        if (!st.done) one.broken = true;
+        await sleep(40);
+    } catch (e) {
+        res.errors.push(`harness: ${e && e.message ? e.message : String(e)}`);
+        one.broken = true;
+    }
+}
+
+async function finishOne (one, plan, baseDir) {
+    const res = one.res;
+    try {
+        if (one.page && res.runs.length) {
+            const page = one.page;
+            await page.bringToFront(); // a hidden page does not draw: the snapshot would never come
+            await sleep(40);
+            if (plan.read) Object.assign(res, await page.evaluate(pageRead, plan.read));
+            const url = await page.evaluate(pageSnapshot);
+            const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
+            res.stage = [png.readUInt32BE(16), png.readUInt32BE(20)];
+            if (plan.snapshots) {
+                const dir = path.resolve(baseDir, plan.snapshots);
+                fs.mkdirSync(dir, {recursive: true});
+                const file = path.join(dir, `${res.id}-${res.mode}.png`);
+                fs.writeFileSync(file, png);
+                res.snapshot = file;
+            }
         }
     } catch (e) {
         res.errors.push(`harness: ${e && e.message ? e.message : String(e)}`);
     } finally {
-        await page.close();
+        if (one.page) await one.page.close();
     }
     return res;
 }
@@ -281,7 +337,16 @@ async function main (plan, baseDir) {
         return {file, id: p.id || path.basename(file).replace(/\.[^.]*$/, '')};
     });
     const htmls = [];
-    for (const p of projects) htmls.push(await packageProject(p.file, cacheDir));
+    const refused = [];
+    for (const p of projects) {
+        try {
+            htmls.push(await packageProject(p.file, cacheDir));
+            refused.push(null);
+        } catch (e) {
+            htmls.push(null);
+            refused.push(e && e.message ? e.message : String(e));
+        }
+    }
     const puppeteer = require('puppeteer-core');
     const browser = await puppeteer.launch({
         executablePath: exe, headless: true, userDataDir: path.join(cacheDir, 'profile'),
@@ -292,10 +357,35 @@ async function main (plan, baseDir) {
             '--window-size=480,360']
     });
     try {
+        const jobs = [];
         for (let i = 0; i < projects.length; i++) {
             for (const mode of plan.modes || ['compiled', 'interpreted']) {
                 if (mode !== 'compiled' && mode !== 'interpreted') throw new Error(`unknown mode ${mode}`);
-                out.results.push(await runOne(browser, htmls[i], projects[i], mode, plan, baseDir));
+                jobs.push({i, mode});
+            }
+        }
+        const repeat = Math.max(1, plan.repeat || 1);
+        const refusedResult = (i, mode) => ({id: projects[i].id, file: projects[i].file, mode, runs: [], snapshot: null,
+            stage: null, lists: {}, variables: {}, errors: [`packaging: ${refused[i]}`]});
+        if (plan.interleave) {
+            // every page open at once; round k runs each once, so all see the same machine load
+            const ones = [];
+            for (const j of jobs) ones.push(refused[j.i] ? null : await openOne(browser, htmls[j.i], projects[j.i], j.mode, plan));
+            for (let k = 0; k < repeat; k++) {
+                for (const one of ones) if (one) await runOnce(one, plan);
+            }
+            for (let n = 0; n < jobs.length; n++) {
+                out.results.push(ones[n] ? await finishOne(ones[n], plan, baseDir) : refusedResult(jobs[n].i, jobs[n].mode));
+            }
+        } else {
+            for (const j of jobs) {
+                if (refused[j.i]) {
+                    out.results.push(refusedResult(j.i, j.mode));
+                    continue;
+                }
+                const one = await openOne(browser, htmls[j.i], projects[j.i], j.mode, plan);
+                for (let k = 0; k < repeat; k++) await runOnce(one, plan);
+                out.results.push(await finishOne(one, plan, baseDir));
             }
         }
     } finally {

@@ -216,6 +216,16 @@ function pushCall (vm, target, proccode, args) {
     return vm.runtime._pushThread(id, target);
 }
 
+function setVariables (target, values) {
+    const scopes = [target, target.runtime.getTargetForStage()];
+    for (const [name, value] of Object.entries(values)) {
+        const v = scopes.map(t => Object.values(t.variables).find(x => x.name === name && x.type === ''))
+            .find(Boolean);
+        if (!v) throw new Error(`no variable ${JSON.stringify(name)} in ${target.getName()}`);
+        v.value = value;
+    }
+}
+
 function active (vm) {
     return vm.runtime.threads.some(t => !t.updateMonitor && !t.isKilled);
 }
@@ -325,6 +335,7 @@ async function main (plan, baseDir, print = true) {
             counter.byOpcode = run.opcodes ? {} : null;
             strokes.on = Boolean(run.pen);
             strokes.list = [];
+            if (run.set) setVariables(findTarget(vm, run.set.target), run.set.variables || {});
             const t0 = process.hrtime.bigint();
             if (run.greenFlag) vm.greenFlag();
             if (run.call) pushCall(vm, findTarget(vm, run.call.target), run.call.proccode, run.call.args);

@@ -119,7 +119,9 @@ class Result:
     def problems(self) -> list[str]:
         """What a person would call broken: errors, a script still running, a blank stage."""
         out = list(self.errors)
-        if not self.done:
+        if not self.runs:
+            out.append("the project did not run")
+        elif not self.done:
             out.append(f"a script was still running ({self.runs[-1]['running'] if self.runs else '?'} threads)")
         if self.blank():
             out.append("the stage is blank")
@@ -137,14 +139,16 @@ class Run:
 
 def run(projects: Sequence[str | Path | tuple[str, str | Path]], *, modes: Sequence[str] = ("compiled", "interpreted"),
         repeat: int = 1, action: dict | None = None, read: dict | None = None, timeout_ms: int = 120_000,
-        snapshots: str | Path | None = None, timeout: float = 3600) -> Run:
+        snapshots: str | Path | None = None, timeout: float = 3600, interleave: bool = False) -> Run:
     """Run each project (a path, or ``(id, path)``) in each mode, ``repeat`` times; the stage image
     after the last run. ``action``: ``{"greenFlag": True}`` (default) or ``{"call": {"target",
-    "proccode", "args"}}``; ``read``: ``{"target", "lists", "variables"}`` read after the last run."""
+    "proccode", "args"}}``; ``read``: ``{"target", "lists", "variables"}`` read after the last run.
+    ``interleave``: open every page first, then run each once per round, so that timings of
+    different projects are taken side by side under the same machine load."""
     items = [(p[0], Path(p[1])) if isinstance(p, tuple) else (Path(p).stem, Path(p)) for p in projects]
     with tempfile.TemporaryDirectory(prefix="bake-tw-") as tmp:
         plan = {"projects": [{"file": str(p.resolve()), "id": i} for i, p in items], "modes": list(modes),
-                "repeat": int(repeat), "timeoutMs": int(timeout_ms),
+                "repeat": int(repeat), "timeoutMs": int(timeout_ms), "interleave": bool(interleave),
                 "snapshots": str(Path(snapshots).resolve()) if snapshots else str(Path(tmp) / "shots")}
         if action:
             plan["action"] = action

@@ -6,28 +6,32 @@ offsets to a scene-relative unit, the tree was built with exactly these planes, 
 lie in the same plane share one entry (orientation is made canonical by flipping the node).
 
 ``bsp nodes``: variable-length records, addressed by the (1-based) item index of their first item;
-the root is at item 1. The first item ``T`` says what the record is:
+the root is at item 1. The first item ``T`` says what the record is (format 2: every number the
+walk needs is stored, nothing is computed from it per frame):
 
 ======  ==============================  =======================================================
 ``T``   items                           meaning
 ======  ==============================  =======================================================
-0       ``0, first, n``                 leaf: draw triangles first .. first+n-1 in order,
-                                        skipping single-sided ones that face away
-1       ``1, first, np, ns``            peel: draw ``np`` triangles from ``first`` (culled),
-                                        then the child (the next record), then ``ns`` more
->= 2    ``T, B, first, nA, nB``         split on plane ``T - 1``: children and coplanar faces
-<= -2   ``T, B, first, nA, nD, nB``     split on plane ``-T - 1`` with two-sided coplanar faces
+0       ``0, first, n``                 leaf: triangles first .. first+n-1, in this order
+1       ``1, first, np, first2, ns``    peel: ``np`` triangles from ``first``, then the child
+                                        (the next record, 5 items on), then ``ns`` from
+                                        ``first2`` (= first + np)
+>= 4    ``T, B, fF, nF, fB, nB``        split on the plane whose ``d`` is item ``T`` of ``bsp
+                                        planes`` (plane ``T / 4``: a, b, c at ``T-3 .. T-1``)
 ======  ==============================  =======================================================
 
-Split records: the front child is the next record unless ``B < 0``; the back child is at item
-``B`` if ``B > 0``, at item ``-B`` if ``B < 0`` (and then there is no front child), none if
-``B = 0``. Coplanar triangles start at ``first``: ``nA`` seen from the front, then ``nD``
-two-sided, then ``nB`` seen from the back. With the eye in front draw the back child, the ``nA +
-nD`` triangles from ``first``, then the front child; with the eye behind draw the front child,
-the ``nD + nB`` triangles from ``first + nA``, then the back child.
+Split records: the front child is the next record (6 items on) unless ``B < 0``; the back child is
+at item ``B`` if ``B > 0``, at item ``-B`` if ``B < 0`` (and then there is no front child), none if
+``B = 0``. The coplanar triangles are two ready-made ranges: with the eye in front (or on the
+plane) draw the back child, ``nF`` triangles from ``fF``, then the front child; with the eye behind
+the front child, ``nB`` from ``fB``, then the back child. (The coplanar triangles are stored
+``nA`` seen from the front, ``nD`` two-sided, ``nBack`` seen from the back: ``fF = first, nF = nA
++ nD, fB = first + nA, nB = nD + nBack``.)
 
-Every triangle of the scene appears in exactly one range; the BSP stage reorders the scene's
-triangles so that each range is contiguous (``first`` is 1-based into the exported triangle list).
+Every triangle of the scene appears in exactly one leaf, peel or coplanar group; the BSP stage
+reorders the scene's triangles so that each is contiguous (``first`` is 1-based into the exported
+triangle list). Back faces are not culled by the walk: a renderer skips the triangles that face
+away (on screen, or in 3D), which is why the order inside a leaf is only right for the faces drawn.
 """
 
 from __future__ import annotations
@@ -39,6 +43,10 @@ import numpy as np
 from .build import Tree
 
 LEAF, PEEL = 0, 1
+SPLIT_SIZE, PEEL_SIZE, LEAF_SIZE = 6, 5, 3
+
+NODES_DOC = ("BSP records (0 leaf: first, n; 1 peel: first, np, first2, ns; >=4 split: item of the plane's d, "
+             "back, fF, nF, fB, nB) — docs/formats-bsp.md")
 
 
 @dataclass
@@ -101,7 +109,7 @@ def encode(tree: Tree, frag_tris: np.ndarray) -> Encoded:
             continue
         if len(pre) or len(suf):
             npre, nsuf = int(frag_tris[pre].sum()), int(frag_tris[suf].sum())
-            items += [PEEL, tri_counter + 1, npre, nsuf]
+            items += [PEEL, tri_counter + 1, npre, tri_counter + 1 + npre, nsuf]
             frags += [pre, suf]
             tri_counter += npre + nsuf
             kinds["peel"] += 1
@@ -123,12 +131,8 @@ def encode(tree: Tree, frag_tris: np.ndarray) -> Encoded:
         nA, nD, nB = (int(frag_tris[x].sum()) for x in (A, D, B))
         first = tri_counter + 1
         b_pos = len(items) + 1
-        if len(D):
-            items += [-(p + 1), 0, first, nA, nD, nB]
-            kinds["split_two_sided"] += 1
-        else:
-            items += [p + 1, 0, first, nA, nB]
-            kinds["split"] += 1
+        items += [4 * p, 0, first, nA + nD, first + nA, nD + nB]
+        kinds["split_two_sided" if len(D) else "split"] += 1
         frags += [A, D, B]
         tri_counter += nA + nD + nB
         if f >= 0 and b >= 0:

@@ -20,7 +20,7 @@ from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
 from ..scratch.numbers import format_numbers, json_array, project_json_bytes, round_positions
 from .cost import blocks_estimate, walk_counts
-from .encode import Encoded, encode
+from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
 from .split import FaceStore, face_planes
 
@@ -237,8 +237,8 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
 
 def typical_walk(scene: Scene, enc: Encoded) -> dict:
     """One frame's walk from the eye the reader sprite starts with (bake.scratch.project.auto_camera:
-    in front of, above and left of the model): records, plane tests, triangles tested and drawn,
-    and the Scratch blocks that costs (bake/bsp/cost.py)."""
+    in front of, above and left of the model): records, plane tests, ranges and the triangles in
+    them (and how many face the eye), and the Scratch blocks the walk costs (bake/bsp/cost.py)."""
     from ..scratch.project import auto_camera
 
     cam = auto_camera(scene.positions[scene.used_vertex_mask()])
@@ -246,8 +246,7 @@ def typical_walk(scene: Scene, enc: Encoded) -> dict:
     two_mat = np.array([m.double_sided for m in scene.materials], bool)
     two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
     counts = walk_counts(enc.nodes, enc.planes, scene.triangles, scene.positions, two, eye)
-    return {"eye": eye, **counts, "plane_tests": counts["split"] + counts["split_two_sided"],
-            "blocks_estimate": blocks_estimate(counts)}
+    return {"eye": eye, **counts, "plane_tests": counts["split"], "blocks_estimate": blocks_estimate(counts)}
 
 
 def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tuple[int, int]:
@@ -321,8 +320,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     return new, rec
 
 
-_NODES_DOC = ("BSP records (0 leaf: first, n; 1 peel: first, np, ns; >=2 split: plane+1, back, first, "
-              "nA, nB; <=-2: with two-sided nD) — docs/formats-bsp.md")
+_NODES_DOC = NODES_DOC
 _PLANES_DOC = "a, b, c, d per BSP plane (eye in front when a*x + b*y + c*z - d >= 0)"
 
 __all__ = ["stage", "build", "write_scene", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]

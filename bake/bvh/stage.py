@@ -88,9 +88,11 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     what = {"binary": "7 items per node: box lo xyz, hi xyz, link",
             "wide4": "6-item root box, then 27 items per 4-wide node",
             "quantised": "6-item root box, then 7 items per 4-wide node (packed child boxes)"}
+    record_items = {"binary": (0, 7), "wide4": (6, 27), "quantised": (6, 7)}[cfg.layout]
     scene = scene.with_list(ScratchList(
         names["nodes"], enc.nodes, stride=1, kind="number", decimals=None,
-        doc=f"BVH ({cfg.layout}): {what[cfg.layout]}; see docs/formats-bvh.md"))
+        doc=f"BVH ({cfg.layout}): {what[cfg.layout]}; see docs/formats-bvh.md",
+        pack_prefix=record_items[0], pack_stride=record_items[1]))
     scene = scene.with_list(ScratchList(
         names["tris"], enc.tris, stride=9, kind="number", decimals=None,
         doc="BVH leaf slots: triangle corners v0 v1 v2 (x y z each)"))

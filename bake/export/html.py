@@ -6,7 +6,9 @@ shows what Scratch will load: previews rendered from the rounded lists in the pa
 of the BSP walk next to a z-buffer render and their difference, textures and the lightmap
 decoded back from each encoding, a bar per Scratch limit, the stage table with effects run and
 skipped, and the sweep tables and plots. One self-contained file: images are embedded as PNG
-data URIs, no script, no network.
+data URIs, no script, no network -- except under ``bake watch`` (``write(..., live=True)``), which
+adds a few lines of script that reload the page when the watch writes a new one (see
+:func:`live_script`).
 
     html_text, info = build(out_dir)       # info: what each image is, for tests and the CLI
     write(out_dir)                         # out_dir/report.html (atomic)
@@ -25,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .report import _fmt_bytes
+from .report import _fmt_bytes, cache_note
 from .write import write_atomic
 
 HTML_NAME = "report.html"
@@ -256,7 +258,9 @@ def _stages_section(report: dict) -> str:
         cin, cout = _faces(st["counts_in"]), _faces(st["counts_out"])
         acc = "<br>".join(f"{_esc(k)} {_esc(_fmt_accuracy(k, v))}" for k, v in st.get("accuracy", {}).items())
         warn = "<br>".join(_esc(w) for w in st.get("warnings", []))
-        rows.append(f"<tr><td>{_esc(st['name'])}</td><td class=n>{st['seconds']:.3f}</td>"
+        note = cache_note(st)
+        note = f"<br><span class=sub>{_esc(note)}</span>" if note else ""
+        rows.append(f"<tr><td>{_esc(st['name'])}{note}</td><td class=n>{st['seconds']:.3f}</td>"
                     f"<td><div class='bar ok' style='min-width:80px'><span style='width:{min(frac, 1) * 100:.1f}%'>"
                     f"</span></div></td><td class=n>{cin}</td><td class=n>{cout}</td><td>{acc}</td>"
                     f"<td>{warn}</td></tr>")
@@ -295,9 +299,9 @@ def _bsp_section(report: dict) -> str:
             ("list bytes", f"{_fmt_bytes(nbytes)} in project.json ({d.get('bytes_per_triangle', 0):.1f} per triangle)")]
     if w:
         rows.append(("one frame's walk", f"from the reader's starting eye: {w['plane_tests']:,} plane tests, "
-                                         f"{w['tested'] + w.get('tested_two_sided', 0):,} triangles tested, "
-                                         f"{w['drawn'] + w['coplanar_drawn']:,} drawn; ≈ {w['blocks_estimate']:,} "
-                                         "blocks (estimate fitted to scratch-vm, docs/formats-bsp.md)"))
+                                         f"{w['ranges']:,} ranges of {w['triangles']:,} triangles "
+                                         f"({w['facing']:,} face the eye); ≈ {w['blocks_estimate']:,} blocks "
+                                         "(estimate fitted to scratch-vm, docs/formats-bsp.md)"))
     body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in rows)
     return f"<h2>BSP: what painter's order costs</h2><table>{body}</table>"
 
@@ -464,8 +468,48 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     return page, info
 
 
-def write(out_dir: Path, **kw) -> dict[str, Any]:
-    """Write ``out_dir/report.html`` atomically; returns :func:`build`'s info."""
+LIVE_NAME = "report-live.js"
+LIVE_POLL_MS = 300
+
+
+def live_script(stamp: str) -> str:
+    """What ``bake watch`` adds to report.html so that an open page reloads itself after a bake.
+
+    No server: every 0.3 s the page adds a ``<script src="report-live.js?<time>">`` element (a
+    browser loads scripts from ``file://`` pages, which it refuses to ``fetch``; the query defeats
+    its cache). The watch rewrites report-live.js after each report.html with a call naming the
+    new page's stamp (a hash of the page); a page whose own stamp differs reloads itself, so it
+    shows the new report (Chromium keeps the scroll position: tests/test_watch.py). Without the file (the watch
+    ended) the element fails to load and nothing happens."""
+    return ("<script>/* bake watch: reload when a new report is written */(function(){var s='%s';"
+            "window.bakeReportStamp=function(t){if(t!==s){location.reload();}};"
+            "setInterval(function(){var e=document.createElement('script');e.src='%s?'+Date.now();"
+            "e.onload=e.onerror=function(){e.remove();};document.head.appendChild(e);},%d);})();</script>"
+            % (stamp, LIVE_NAME, LIVE_POLL_MS))
+
+
+def make_live(page: str) -> tuple[str, str]:
+    """The page with :func:`live_script` in it, and its stamp (a hash of the page without it)."""
+    import hashlib
+
+    stamp = hashlib.sha256(page.encode("utf-8")).hexdigest()[:16]
+    return page.replace("</body>", live_script(stamp) + "</body>", 1), stamp
+
+
+def write_live_stamp(out_dir: Path, stamp: str) -> None:
+    """``report-live.js`` naming the page of ``stamp``: written after that page is in place, so an
+    open browser reloads only to a complete page."""
+    write_atomic(Path(out_dir) / LIVE_NAME, f"window.bakeReportStamp&&window.bakeReportStamp('{stamp}');\n"
+                 .encode("utf-8"))
+
+
+def write(out_dir: Path, *, live: bool = False, **kw) -> dict[str, Any]:
+    """Write ``out_dir/report.html`` atomically; returns :func:`build`'s info. ``live``: with the
+    reload script of :func:`live_script`, then ``report-live.js`` naming this page."""
     page, info = build(out_dir, **kw)
+    if live:
+        page, info["live_stamp"] = make_live(page)
     write_atomic(Path(out_dir) / HTML_NAME, page.encode("utf-8"))
+    if live:
+        write_live_stamp(out_dir, info["live_stamp"])
     return info

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import dataclass
 import re
 import time
 
@@ -86,24 +87,104 @@ def _whole_polygons(scene: Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     return polys, covered
 
 
+@dataclass
+class ListChoice:
+    """Whether an optional list is written, and why (``report.md`` shows the lists left out)."""
+
+    name: str  # the list's name
+    key: str  # the config key that decides it
+    write: bool
+    available: bool  # the scene has the data (a list left out of nothing is not reported)
+    reason: str
+
+
+def textures_in_project(scene: Scene) -> bool:
+    """Whether the bake puts a texture into the project (a costume or a texture list) that an
+    engine can sample with ``tri uvs``."""
+    out = scene.artefacts.get("texture_outputs") or {}
+    return bool(scene.artefacts.get("costumes")) or bool(out.get("lists"))
+
+
+def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
+    """The optional per-triangle and per-vertex lists: ``"yes"`` writes one (zeros or white
+    where the scene has no data), ``"no"`` leaves it out, ``"auto"`` writes what the reader sprite
+    or an engine built on the documented lists reads and leaves out what nothing would read:
+
+    * ``tri colors``: when the scene has per-triangle colours (baked light, texture means);
+    * ``vert colors``: when the scene has per-vertex colours and no per-triangle colours (a lit
+      bake has both: the reader draws ``tri colors``, so the per-vertex copy of the same light
+      is left out unless asked for);
+    * ``tri uvs``: when a texture goes into the project (textures stage: a costume or a texture
+      list) for an engine to sample;
+    * ``lightmap uvs``: when the scene has a lightmap atlas.
+
+    * ``mat two-sided``: when a material is two-sided, or with a BSP tree (its walk culls the
+      single-sided triangles that face away, so an engine needs to know which are which).
+
+    Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages."""
+    n = cfg.names
+    has_fc = scene.face_colors is not None
+    has_vc = scene.vertex_colors is not None
+    textured = any(m.texture is not None or m.texture_data is not None for m in scene.materials)
+    has_uv = textured and scene.tri_uvs is not None
+    has_lm = scene.tri_lightmap_uvs is not None
+    tex = textures_in_project(scene)
+    two = any(bool(m.double_sided) for m in scene.materials)
+
+    def pick(name: str, key: str, setting: str, available: bool, auto: bool, why_not: str) -> ListChoice:
+        if setting == "yes":
+            return ListChoice(name, key, True, available, f"{key} = \"yes\"")
+        if setting == "no":
+            return ListChoice(name, key, False, available, f"{key} = \"no\"")
+        return ListChoice(name, key, auto, available, "written: read by the reader or an engine" if auto else why_not)
+
+    return {c.name: c for c in (
+        pick(n.triangle_colors, "export.triangle_colors", cfg.triangle_colors, has_fc, has_fc,
+             "the scene has no per-triangle colours"),
+        pick(n.vertex_colors, "export.vertex_colors", cfg.vertex_colors, has_vc, has_vc and not has_fc,
+             f"'{n.triangle_colors}' carries the same colours per triangle, which the reader draws; "
+             "set export.vertex_colors = \"yes\" for an engine that shades per vertex"
+             if has_vc else "the scene has no per-vertex colours"),
+        pick(n.uvs, "export.uvs", cfg.uvs, has_uv, has_uv and tex,
+             "no texture goes into the project (textures.enabled = false or no encodings), so nothing "
+             "would sample the UVs; set textures.enabled = true to bake the texture, or export.uvs = \"yes\""
+             if has_uv else "the scene has no textured triangles with UVs"),
+        pick(n.lightmap_uvs, "export.lightmap_uvs", cfg.lightmap_uvs, has_lm, has_lm, "the scene has no lightmap"),
+        pick(n.two_sided, "export.two_sided", cfg.two_sided, two, two or "bsp" in scene.artefacts,
+             "every material is single-sided and there is no BSP tree"),
+    )}
+
+
+def first_use_order(seq: np.ndarray, n: int) -> np.ndarray:
+    """Vertex numbers ``0..n-1`` in the order ``seq`` first uses them, unused ones after in their
+    own order: ``order[new] = old``."""
+    seq = np.asarray(seq, np.int64)
+    first = np.full(n, len(seq), np.int64)
+    if len(seq):
+        np.minimum.at(first, seq, np.arange(len(seq)))
+    return np.lexsort((np.arange(n), first))
+
+
 def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
     n = cfg.names
     out: list[ScratchList] = []
     # the grid the pipeline fixed on the scene (the BSP built on it); a scene run through this
     # stage alone gets it from export.precision
+    diag = scene.scale()
     dec = scene.position_decimals
     if dec is None:
-        dec = position_decimals(scene.scale(), cfg.precision)
+        dec = position_decimals(diag, cfg.precision)
     T = scene.n_triangles
     tris = scene.triangles if scene.triangles is not None else np.zeros((0, 3), np.int64)
     mats = scene.tri_material if scene.tri_material is not None else np.zeros(0, np.int64)
     _warn_collapsed(scene, tris, dec, record)
 
-    if cfg.vertices:
-        out.append(ScratchList(n.vertices, scene.positions.ravel(), 3, "x, y, z per vertex", "number", dec))
-
     keep_mask = np.ones(T, bool)
-    poly_lists: list[ScratchList] = []
+    quad_idx = np.zeros((0, 4), np.int64)  # 0-based corners of whole quads
+    quad_mat = np.zeros(0, np.int64)
+    ngon_sizes = np.zeros(0, np.int64)
+    ngon_corners = np.zeros(0, np.int64)  # 0-based corners of whole n-gons, one after another
+    ngon_mat = np.zeros(0, np.int64)
     if cfg.faces != "triangles":
         if "bsp" in scene.artefacts:
             record.warn(f"export.faces = '{cfg.faces}' ignored: the BSP stage orders triangles, "
@@ -113,33 +194,61 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
             quads, covered4 = _whole_polygons(scene, 4)
             keep_mask &= ~covered4
             if len(quads):
-                idx = scene.poly_indices[off[quads][:, None] + np.arange(4)] + 1
-                q = np.concatenate([idx, scene.poly_material[quads][:, None] + 1], axis=1)
-                poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad", "int"))
-            else:
-                poly_lists.append(ScratchList(n.quads, np.zeros(0, np.int64), 5, "v1..v4, material per quad", "int"))
+                quad_idx = scene.poly_indices[off[quads][:, None] + np.arange(4)]
+                quad_mat = scene.poly_material[quads]
             if cfg.faces == "ngons":
                 ngons, coveredn = _whole_polygons(scene, 0)
                 keep_mask &= ~coveredn
-                sizes = scene.poly_sizes[ngons]
-                # record layout: n, material, v1..vn
-                rec_len = sizes + 2
-                starts = np.zeros(len(ngons) + 1, np.int64)
-                np.cumsum(rec_len, out=starts[1:])
-                flat = np.zeros(int(starts[-1]), np.int64)
-                flat[starts[:-1]] = sizes
-                flat[starts[:-1] + 1] = scene.poly_material[ngons] + 1
+                ngon_sizes = scene.poly_sizes[ngons]
+                ngon_mat = scene.poly_material[ngons]
                 if len(ngons):
-                    rep = np.repeat(np.arange(len(ngons)), sizes)
-                    within = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-                    flat[starts[:-1][rep] + 2 + within] = scene.poly_indices[off[ngons][rep] + within] + 1
-                poly_lists.append(ScratchList(n.ngons, flat, 0, "n, material, v1..vn per polygon", "int"))
-            record.details["faces"] = {"quads": int(len(quads)),
-                                       "ngons": int(len(_whole_polygons(scene, 0)[0])) if cfg.faces == "ngons" else 0,
+                    rep = np.repeat(np.arange(len(ngons)), ngon_sizes)
+                    within = np.arange(int(ngon_sizes.sum())) - np.repeat(np.cumsum(ngon_sizes) - ngon_sizes,
+                                                                          ngon_sizes)
+                    ngon_corners = scene.poly_indices[off[ngons][rep] + within]
+            record.details["faces"] = {"quads": int(len(quad_idx)), "ngons": int(len(ngon_sizes)),
                                        "triangles": int(keep_mask.sum())}
 
+    # vertex numbers: in the order the written faces first use them (a list order engines do not
+    # care about, which makes the index lists pack to a symbol or two per corner), or the scene's
+    V = scene.n_vertices
+    new_of = np.arange(V)
+    if cfg.vertex_order == "first-use" and V:
+        seq = np.concatenate([tris[keep_mask].ravel(), quad_idx.ravel(), ngon_corners]).astype(np.int64)
+        order = first_use_order(seq, V)
+        new_of = np.empty(V, np.int64)
+        new_of[order] = np.arange(V)
+    else:
+        order = np.arange(V)
+    record.details["vertex_order"] = cfg.vertex_order
+
+    if cfg.vertices:
+        out.append(ScratchList(n.vertices, scene.positions[order].ravel(), 3, "x, y, z per vertex", "number", dec))
+        if V:  # rounding to `dec` decimals moves a coordinate by at most half a step
+            record.accuracy["position_error"] = 0.5 * 10.0 ** -dec / diag if diag > 0 else 0.0
+            record.details["positions"] = {"decimals": dec, "step": 10.0 ** -dec, "max_error": 0.5 * 10.0 ** -dec,
+                                           "max_error_of_diagonal": record.accuracy["position_error"]}
+
+    poly_lists: list[ScratchList] = []
+    if cfg.faces != "triangles" and "bsp" not in scene.artefacts:
+        q = np.concatenate([new_of[quad_idx] + 1, quad_mat[:, None] + 1], axis=1) if len(quad_idx) else \
+            np.zeros((0, 5), np.int64)
+        poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad", "int"))
+        if cfg.faces == "ngons":
+            # record layout: n, material, v1..vn
+            starts = np.zeros(len(ngon_sizes) + 1, np.int64)
+            np.cumsum(ngon_sizes + 2, out=starts[1:])
+            flat = np.zeros(int(starts[-1]), np.int64)
+            flat[starts[:-1]] = ngon_sizes
+            flat[starts[:-1] + 1] = ngon_mat + 1
+            if len(ngon_sizes):
+                rep = np.repeat(np.arange(len(ngon_sizes)), ngon_sizes)
+                within = np.arange(int(ngon_sizes.sum())) - np.repeat(np.cumsum(ngon_sizes) - ngon_sizes, ngon_sizes)
+                flat[starts[:-1][rep] + 2 + within] = new_of[ngon_corners] + 1
+            poly_lists.append(ScratchList(n.ngons, flat, 0, "n, material, v1..vn per polygon", "int"))
+
     if cfg.triangles:
-        t = np.concatenate([tris[keep_mask] + 1, mats[keep_mask][:, None] + 1], axis=1)
+        t = np.concatenate([new_of[tris[keep_mask]].reshape(-1, 3) + 1, mats[keep_mask][:, None] + 1], axis=1)
         out.append(ScratchList(n.triangles, t.ravel(), 4, "v1, v2, v3 (1-based), material (1-based)", "int"))
     out.extend(poly_lists)
 
@@ -148,37 +257,107 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         vals, kind = _colour_list(mc, cfg.color_format)
         out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
 
-    two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
-    if cfg.two_sided == "yes" or (cfg.two_sided == "auto" and (two.any() or "bsp" in scene.artefacts)):
+    choice = choose_lists(scene, cfg)
+    if choice[n.two_sided].write:
+        two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
         out.append(ScratchList(n.two_sided, two.astype(np.int64), 1,
                                "1 if the material is two-sided (drawn from both sides), 0 if single-sided", "int"))
 
-    want_tri = cfg.triangle_colors == "yes" or (cfg.triangle_colors == "auto" and scene.face_colors is not None)
-    if want_tri:
+    if choice[n.triangle_colors].write:
         fc = scene.face_colors if scene.face_colors is not None else scene.triangle_albedo()
         vals, kind = _colour_list(fc[keep_mask], cfg.color_format)
         out.append(ScratchList(n.triangle_colors, vals, 1, "colour number per triangle", kind))
 
-    want_vc = cfg.vertex_colors == "yes" or (cfg.vertex_colors == "auto" and scene.vertex_colors is not None)
-    if want_vc:
+    if choice[n.vertex_colors].write:
         vc = scene.vertex_colors if scene.vertex_colors is not None else np.ones((scene.n_vertices, 4))
-        vals, kind = _colour_list(vc, cfg.color_format)
+        vals, kind = _colour_list(vc[order], cfg.color_format)
         out.append(ScratchList(n.vertex_colors, vals, 1, "colour number per vertex", kind))
 
-    textured = any(m.texture is not None or m.texture_data is not None for m in scene.materials)
-    want_uv = cfg.uvs == "yes" or (cfg.uvs == "auto" and textured and scene.tri_uvs is not None)
-    if want_uv:
+    if choice[n.uvs].write:
         uv = scene.tri_uvs if scene.tri_uvs is not None else np.zeros((T, 3, 2))
         out.append(ScratchList(n.uvs, uv[keep_mask].ravel(), 6, "u1, v1, u2, v2, u3, v3 per triangle", "number", 4))
 
-    want_lm = cfg.lightmap_uvs == "yes" or (cfg.lightmap_uvs == "auto" and scene.tri_lightmap_uvs is not None)
-    if want_lm:
+    if choice[n.lightmap_uvs].write:
         lm = scene.tri_lightmap_uvs if scene.tri_lightmap_uvs is not None else np.zeros((T, 3, 2))
         img = scene.artefacts.get("lightmap_image")
         side = max(img.shape[:2]) if img is not None else 4096
         out.append(ScratchList(n.lightmap_uvs, lm[keep_mask].ravel(), 6,
                                "lightmap u1, v1, u2, v2, u3, v3 per triangle (v up)", "number",
                                decimals_for(0.1 / side)))  # a tenth of a texel
+    for c in choice.values():
+        if not c.write and c.available:  # data the scene has that the bake leaves out: say why
+            record.effects.append({"name": f"list '{c.name}'", "ran": False, "reason": c.reason, "key": c.key})
+    record.details["lists_left_out"] = [{"list": c.name, "key": c.key, "reason": c.reason}
+                                        for c in choice.values() if not c.write and c.available]
+    return out
+
+
+def index_columns(name: str, cfg: ExportConfig) -> tuple[int, ...]:
+    """Columns of a list holding vertex numbers in first-use order (packed as index codes)."""
+    if cfg.vertex_order != "first-use":
+        return ()
+    return {cfg.names.triangles: (0, 1, 2), cfg.names.quads: (0, 1, 2, 3)}.get(name, ())
+
+
+def pack_lists(lists: list[ScratchList], values: dict[str, list], info: dict[str, dict], cfg: ExportConfig,
+               rec: StageRecord) -> dict:
+    """The lists to store packed (name -> :class:`bake.scratch.pack.Packed`, in list order): each
+    numeric list whose packed text is smaller than its plain items, within ``pack_max_items``.
+    Every packed text is decoded again here and must give the plain items back exactly."""
+    from ..errors import StageError
+    from ..scratch.loader import decode_cost, total_cost
+    from ..scratch.pack import pack, packed_bytes, unpack
+
+    out: dict = {}
+    costs: dict = {}
+    rows: list[dict] = []
+    for lst in lists:
+        name = lst.name
+        n_items = info[name]["items"]
+        plain = info[name]["project_json_bytes"]
+        why = None
+        if lst.kind == "string":
+            why = "text items (not packed)"
+        elif n_items == 0:
+            why = "empty"
+        elif cfg.pack_max_items and n_items > cfg.pack_max_items:
+            why = (f"{n_items:,} items is more than export.pack_max_items = {cfg.pack_max_items:,} (vanilla Scratch's "
+                   "`add to list` stops at 200,000; set 0 for TurboWarp)")
+        pk = None
+        if why is None:
+            pk = pack(name, values[name], lst.pack_stride or lst.stride, prefix=lst.pack_prefix,
+                      index_columns=index_columns(name, cfg))
+            if pk is None:
+                why = "values are not decimals below 2^53 (not packed)"
+        if pk is not None:
+            size = packed_bytes(name, pk.text)
+            if size >= plain:
+                why = f"packing would not save bytes ({size} >= {plain})"
+            else:
+                u = unpack(pk.text, name)
+                if u.items != values[name] or len(u.items) != len(values[name]):
+                    raise StageError(f"list '{name}': the packed text does not decode to the list (a bug)")
+                info[name].update({"plain_bytes": plain, "project_json_bytes": size,
+                                   "packed": {"chars": pk.chars, "bytes": size, "columns": pk.describe()}})
+                out[name] = pk
+                costs[name] = u.cost
+                rows.append({"list": name, "items": n_items, "plain_bytes": plain, "packed_bytes": size,
+                             "ratio": round(size / plain, 4), "columns": pk.describe()})
+                continue
+        rec.effects.append({"name": f"pack '{name}'", "ran": False, "reason": why})
+    for row in rows:  # blocks the loader runs for each list, as scratch-vm counts them
+        row["decode_blocks"] = decode_cost(costs[row["list"]], len(rows))
+        info[row["list"]]["packed"]["decode_blocks"] = row["decode_blocks"]
+    if out:
+        total_plain = sum(r["plain_bytes"] for r in rows)
+        total = sum(r["packed_bytes"] for r in rows)
+        rec.details["pack"] = {"lists": rows, "plain_bytes": total_plain, "packed_bytes": total,
+                               "decode_blocks": total_cost([costs[r["list"]] for r in rows]),
+                               "list": cfg.names.packed}
+        rec.effects.append({"name": "pack", "ran": True,
+                            "reason": f"{len(out)} lists packed: {total_plain:,} -> {total:,} bytes in project.json; "
+                                      f"the loader rebuilds them at the green flag "
+                                      f"({rec.details['pack']['decode_blocks']:,} blocks in scratch-vm)"})
     return out
 
 
@@ -243,8 +422,11 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         from ..scratch.project import project_outputs
 
         values = {k: json.loads(v) for k, v in arrays.items()}
-        projects, extra_read = project_outputs(scene, cfg, values, name, rec)
+        packed = pack_lists(lists, values, info, cfg, rec) if cfg.pack else {}
+        projects, extra_read = project_outputs(scene, cfg, values, name, rec, packed=packed)
         files.update(projects)
+    elif cfg.pack:
+        rec.warn("export.pack: no project is written (export.sb3, sprite3 and into are off), so nothing is packed")
     for cname, png in scene.artefacts.get("costumes", []) or []:  # texture costumes as files too
         files[f"assets/{re.sub(r'[^A-Za-z0-9._-]+', '_', cname).strip('._') or 'costume'}.png"] = png
 

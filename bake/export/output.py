@@ -63,12 +63,15 @@ def check_paths(out_dir: Path, *, depfile: Path | None = None, inputs: Iterable[
             raise ConfigError("--depfile would overwrite an output of the bake", path=depfile)
 
 
-def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) -> dict[str, Any]:
+def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
+           live_report: bool = False) -> dict[str, Any]:
     """Write every output under ``out_dir`` (and the depfile) and return the report.
 
     Nothing is renamed until everything is staged: the lists and projects, then the report built
     from what is staged (its ``outputs`` say what the commit will do), report.html rendered from
-    the staged bytes, the depfile. Limits are checked by the caller (``--strict``)."""
+    the staged bytes, the depfile. Limits are checked by the caller (``--strict``).
+    ``live_report``: report.html reloads itself in a browser when rewritten (``bake watch``:
+    ``html.live_script``; report-live.js is written after the commit)."""
     out_dir = Path(out_dir)
     cfg = result.config
     files: dict[str, bytes] = dict(result.scene.artefacts.get("outputs", {}))
@@ -99,10 +102,18 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None) ->
             w = cfg.report.preview_width
             page, _ = html.build(out_dir, width=w, height=max(1, w * 3 // 4),
                                  files={**files, "report.json": rep_json})
+            stamp = None
+            if live_report:
+                page, stamp = html.make_live(page)
             outs.add("report.html", page.encode("utf-8"))
         if depfile is not None:
             outs.add_file(Path(depfile), depfile_for(result, out_dir).encode("utf-8"))
         outs.commit()
+    if live_report and cfg.report.html:
+        html.write_live_stamp(out_dir, stamp)
+    from ..pipeline import finish_cache
+
+    finish_cache(result)  # a new folder's stage cache: only now that the outputs are written
     return rep
 
 

@@ -123,7 +123,8 @@ def stage_camera(cam, width: int = 480) -> Camera:
 def cameras(verts: np.ndarray, width: int = 320, height: int = 240, fov: float = 45.0
             ) -> list[tuple[str, Camera]]:
     """Four views: the green flag's (the reader sprite's camera, :func:`bake.scratch.project.auto_camera`,
-    on a stage-shaped image ``width`` wide), then three that frame the model's bounding sphere:
+    on a stage-shaped image ``width`` wide; plain material colours flat, as the reader draws
+    them), then three that frame the model's bounding sphere:
     front right above, back left, top. The frame is the export's (x right, y up, z into the
     screen): "front" looks along +z, "right" is +x."""
     from ..scratch.project import auto_camera
@@ -188,9 +189,10 @@ def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bot * fy
 
 
-def shade(mesh: Mesh, camera: Camera, im: Image, background=(1.0, 1.0, 1.0)) -> np.ndarray:
+def shade(mesh: Mesh, camera: Camera, im: Image, background=(1.0, 1.0, 1.0), *, light: bool = True) -> np.ndarray:
     """(H, W, 3) uint8: the colour Scratch shows at each pixel of a render (see
-    :attr:`Mesh.colour_source`)."""
+    :attr:`Mesh.colour_source`). ``light=False``: plain material colours stay flat, as the
+    reader sprite draws them (no headlight)."""
     H, W = im.tri_id.shape
     img = np.empty((H, W, 3))
     img[:] = np.asarray(background, np.float64)[:3]
@@ -211,7 +213,9 @@ def shade(mesh: Mesh, camera: Camera, im: Image, background=(1.0, 1.0, 1.0)) -> 
             if mesh.vertex_output == "light":
                 col = col * mesh.mat_rgb[mesh.material[tid]]
         else:  # plain material colours: a headlight so the shape reads
-            col = mesh.mat_rgb[mesh.material[tid]] * headlight(mesh.corners[tid], camera)[:, None]
+            col = mesh.mat_rgb[mesh.material[tid]]
+            if light:
+                col = col * headlight(mesh.corners[tid], camera)[:, None]
         img[cov] = col
     return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
 
@@ -267,16 +271,18 @@ def difference(painter: Image, zbuf: Image, pimg: np.ndarray, zimg: np.ndarray, 
                  "wrong_fraction": float(wrong.sum() / covered) if covered else 0.0}
 
 
-def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5) -> tuple[View, Image]:
+def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light: bool = True
+                ) -> tuple[View, Image]:
     """One view (see :func:`render_views`) and the painter's :class:`bake.render.Image` behind it
-    (which triangle each pixel shows, how far it is from that triangle's edge)."""
+    (which triangle each pixel shows, how far it is from that triangle's edge). ``light``: see
+    :func:`shade`."""
     corners = mesh.corners
     diag = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if len(mesh.verts) else 1.0
     two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
     order, how = painter_order(mesh, cam.position)
     pim = render(cam, corners, mode="painter", order=order, two_sided=two)
     zim = render(cam, corners, mode="zbuffer", two_sided=two)
-    pimg, zimg = shade(mesh, cam, pim), shade(mesh, cam, zim)
+    pimg, zimg = shade(mesh, cam, pim, light=light), shade(mesh, cam, zim, light=light)
     diff, stats = difference(pim, zim, pimg, zimg, cam, corners, tie * diag)
     stats.update({"order": how, "drawn": int(len(order)), "colours": mesh.colour_source})
     return View(name, cam, pimg, zimg, diff, stats), pim
@@ -286,14 +292,15 @@ def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1
     """Each camera of :func:`cameras`: painter's render in the engine's order, the z-buffer
     render, and their difference. ``tie``: faces this close (a fraction of the bounding-box
     diagonal) count as coplanar (:func:`difference`)."""
-    return [render_view(mesh, name, cam, tie)[0] for name, cam in cameras(mesh.verts, width, height)]
+    return [render_view(mesh, name, cam, tie, light=name != "green flag")[0]
+            for name, cam in cameras(mesh.verts, width, height)]
 
 
 # --------------------------------------------------------------------------- a player's stage
 def stage_view(mesh: Mesh, cam, tie: float = 1e-5) -> tuple[View, Image]:
     """The green flag's stage at full size (480 x 360) for the reader camera ``cam``
     (``bake.scratch.readers.Camera``): what a Scratch player should show."""
-    return render_view(mesh, "stage", stage_camera(cam, 480), tie)
+    return render_view(mesh, "stage", stage_camera(cam, 480), tie, light=False)
 
 
 def stage_agreement(stage: np.ndarray, view: View, painter: Image, *, margin: int = 2,

@@ -14,6 +14,9 @@
   bake whose colours are all black); each is also among its stage's warnings
 * ``outputs``: relative path -> "written" | "unchanged" | "removed"
 * ``seconds``: wall time of the whole bake
+* ``cache``: the stage cache's part (``where``, ``from_cache``: the stages loaded rather than run,
+  ``stored``, ``warnings``), null without a cache; a stage from the cache has
+  ``details.cache = {from_cache: true, computed_seconds}`` and ``seconds`` this bake spent on it
 """
 
 from __future__ import annotations
@@ -36,12 +39,16 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
     assets = dict(assets or {})
     info = scene.artefacts.get("list_info", {})
     lists = {name: {"items": v["items"], "stride": v["stride"], "bytes": v["project_json_bytes"],
-                    "file": v.get("file"), "doc": v.get("doc", "")} for name, v in info.items()}
+                    "file": v.get("file"), "doc": v.get("doc", ""),
+                    **({"plain_bytes": v["plain_bytes"], "packed": v["packed"]} if "packed" in v else {})}
+             for name, v in info.items()}
     limits = []
     for name, v in lists.items():
         limits.append({"name": f"list '{name}' items", "value": v["items"], "limit": LIST_ITEM_LIMIT,
                        "ok": v["items"] <= LIST_ITEM_LIMIT,
-                       "note": "vanilla `add to list` stops at 200,000 items; loading a longer list works"})
+                       "note": "packed: vanilla Scratch cannot rebuild more than 200,000 items at the green flag "
+                               "(`add to list` stops there); TurboWarp can" if "packed" in v else
+                               "vanilla `add to list` stops at 200,000 items; loading a longer list works"})
     export = next((r for r in result.records if r.name == "export"), None)
     real = export.details.get("project_json_bytes") if export else None
     if real is not None:
@@ -62,7 +69,10 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
                        "ok": size < ASSET_LIMIT, "note": "each asset must be under 10 MB"})
     effects: list[dict[str, Any]] = []
     for rec in result.records:
-        effects.append({"name": rec.name, "ran": True, "reason": "stage ran", "seconds": round(rec.seconds, 6)})
+        cached = (rec.details.get("cache") or {}).get("from_cache")
+        effects.append({"name": rec.name, "ran": True, "seconds": round(rec.seconds, 6),
+                        "reason": f"from the stage cache (computed in {rec.details['cache']['computed_seconds']:.3f} s)"
+                        if cached else "stage ran"})
         for e in rec.effects:
             effects.append({**e, "name": f"{rec.name}.{e.get('name', '?')}"})
     effects.extend(result.skipped)
@@ -86,7 +96,22 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "outputs": dict(sorted((outputs or {}).items())),
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
+        "cache": _cache_json(getattr(result, "cache", None)),
     }
+
+
+def _cache_json(info: dict[str, Any] | None) -> dict[str, Any] | None:
+    if info is None:
+        return None
+    return {"where": info.get("where"), "from_cache": list(info.get("from_cache", [])),
+            "stored": list(info.get("stored", [])), "warnings": list(info.get("warnings", [])),
+            "load_seconds": round(float(info.get("load_seconds", 0.0)), 6)}
+
+
+def cache_note(stage: dict[str, Any]) -> str:
+    """"from the cache (computed in 6.41 s)" for a stage the bake loaded, else ""."""
+    c = (stage.get("details") or {}).get("cache") or {}
+    return f"from the cache (computed in {c.get('computed_seconds', 0):.2f} s)" if c.get("from_cache") else ""
 
 
 def to_json(report: dict[str, Any]) -> bytes:
@@ -136,19 +161,59 @@ def to_markdown(report: dict[str, Any]) -> str:
         cin, cout = _counts(st["counts_in"]), _counts(st["counts_out"])
         acc = ", ".join(f"{k} {fmt_accuracy(k, v)}" for k, v in st["accuracy"].items())
         warn = "<br>".join(w.replace("|", "\\|") for w in st["warnings"])
-        out.append(f"| {st['name']} | {st['seconds']:.3f} | {cin} | {cout} | {acc} | {warn} |")
+        note = cache_note(st)
+        out.append(f"| {st['name']}{' (' + note + ')' if note else ''} | {st['seconds']:.3f} | {cin} | {cout} | "
+                   f"{acc} | {warn} |")
     out += ["", "## Effects", "", "| effect | ran | reason |", "|---|---|---|"]
     for e in report["effects"]:
         extra = f" ({e['rays']} rays)" if e.get("rays") else ""
         out.append(f"| {e['name']} | {'yes' if e['ran'] else 'no'} | {e.get('reason', '')}{extra} |")
     out += ["", "## Lists", "", "| list | items | stride | project.json bytes | file |", "|---|---:|---:|---:|---|"]
     for name, v in report["lists"].items():
-        out.append(f"| {name} | {v['items']} | {v['stride'] or 'var'} | {v['bytes']} | {v['file'] or ''} |")
+        packed = f" (packed; plain {v['plain_bytes']})" if "packed" in v else ""
+        out.append(f"| {name} | {v['items']} | {v['stride'] or 'var'} | {v['bytes']}{packed} | {v['file'] or ''} |")
+    out += _left_out_markdown(report) + _packed_markdown(report)
     out += ["", "## Limits", "", "| check | value | limit | used | ok |", "|---|---:|---:|---:|---|"]
     for lim in report["limits"]:
         out.append(f"| {lim['name']} | {lim['value']} | {lim['limit']} | {_limit_pct(lim)} | "
                    f"{'ok' if lim['ok'] else '**EXCEEDED**'} |")
     return "\n".join(out) + "\n"
+
+
+def _export_details(report: dict[str, Any]) -> dict[str, Any]:
+    st = next((st for st in report["stages"] if st["name"] == "export"), None)
+    return st["details"] if st else {}
+
+
+def _left_out_markdown(report: dict[str, Any]) -> list[str]:
+    left = _export_details(report).get("lists_left_out") or []
+    if not left:
+        return []
+    out = ["", "## Lists left out", "", "The scene has this data, but nothing the bake writes would read it:", "",
+           "| list | why | key |", "|---|---|---|"]
+    for e in left:
+        out.append(f"| {e['list']} | {e['reason'].replace('|', '/')} | `{e['key']}` |")
+    return out
+
+
+def _packed_markdown(report: dict[str, Any]) -> list[str]:
+    pk = _export_details(report).get("pack")
+    if not pk:
+        return []
+    out = ["", "## Packed lists", "",
+           f"In the project these lists are stored packed in the list `{pk['list']}` and rebuilt, item for "
+           "item, by the reader sprite's `unpack lists` at the green flag (docs/formats.md, \"Packed lists\"); "
+           "the list files and lists.json hold them plain. Decode cost: blocks scratch-vm executes.", "",
+           "| list | items | plain bytes | packed bytes | ratio | decode blocks | coding |",
+           "|---|---:|---:|---:|---:|---:|---|"]
+    for r in pk["lists"]:
+        coding = ", ".join(f"{c['mode']}" + (f"×{c['columns']}" if c["columns"] > 1 else "") +
+                           (f" ({c['palette']} colours)" if "palette" in c else "") for c in r["columns"])
+        out.append(f"| {r['list']} | {r['items']} | {r['plain_bytes']} | {r['packed_bytes']} | {r['ratio']:.3f} | "
+                   f"{r['decode_blocks']} | {coding} |")
+    out.append(f"| **all** | | {pk['plain_bytes']} | {pk['packed_bytes']} | "
+               f"{pk['packed_bytes'] / max(1, pk['plain_bytes']):.3f} | {pk['decode_blocks']} | |")
+    return out
 
 
 def summary_lines(report: dict[str, Any]) -> list[str]:
@@ -161,13 +226,16 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         acc = " ".join(f"{k}={100 * v:.3g}%" if k.startswith("hausdorff") else f"{k}={v:.3g}" for k, v in nums.items())
         if any(k.startswith("hausdorff") for k in nums):
             acc += " (Hausdorff distances in % of the bounding-box diagonal)"
-        lines.append(f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip())
+        note = cache_note(st)
+        lines.append((f"  {st['name']:<12} {st['seconds']:8.3f} s  {acc}".rstrip() + (f"  [{note}]" if note else "")))
         problems = set(st.get("problems", []))
         for w in st["warnings"]:
             lines.append(f"    {'PROBLEM' if w in problems else 'warning'}: {w}")
     total = sum(v["bytes"] for v in report["lists"].values())
+    pk = _export_details(report).get("pack")
+    packed = f" (packed from {_fmt_bytes(total - pk['packed_bytes'] + pk['plain_bytes'])})" if pk else ""
     lines.append(f"  lists: {len(report['lists'])}, {sum(v['items'] for v in report['lists'].values())} items, "
-                 f"{_fmt_bytes(total)} in project.json")
+                 f"{_fmt_bytes(total)} in project.json{packed}")
     for lim in report["limits"]:
         if not lim["ok"]:
             lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']} > {lim['limit']}")

@@ -12,8 +12,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..errors import InputError
 from . import sb3
 from .limits import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
+from .loader import UNPACK_LISTS_FIXED
 
 
 def _size(obj: Any) -> int:
@@ -55,8 +57,69 @@ def check(path: Path) -> dict[str, Any]:
         limits.append({"name": f"asset {name} bytes", "value": len(data), "limit": ASSET_LIMIT,
                        "ok": len(data) < ASSET_LIMIT})
     items.sort(key=lambda r: (-r["bytes"], r["kind"], r["owner"], r["name"]))
+    packed = packed_rows(project, path)
+    for row in packed:
+        limits.append({"name": f"packed list '{row['list']}' items rebuilt by `add to list`", "value": row["items"],
+                       "limit": LIST_ITEM_LIMIT, "ok": row["items"] <= LIST_ITEM_LIMIT,
+                       "note": "vanilla Scratch's `add to list` stops at 200,000; TurboWarp has no limit"})
     return {"project": str(path), "project_json_bytes": pj_bytes, "items": items, "assets": asset_rows,
-            "limits": limits, "problems": sb3.validate_project(project, assets)}
+            "limits": limits, "problems": sb3.validate_project(project, assets), "packed": packed,
+            "decode_blocks": (UNPACK_LISTS_FIXED + sum(r["decode_blocks"] for r in packed)) if packed else 0}
+
+
+def packed_rows(project: dict[str, Any], path: Path | None = None) -> list[dict[str, Any]]:
+    """Every packed text of a project: the list it rebuilds, its items, its bytes in project.json
+    and the blocks the loader runs for it (scratch-vm's count). A bad text is an InputError."""
+    from .loader import decode_cost
+    from .pack import packed_bytes
+
+    found = check_packed_lists(project, path)
+    per_container: dict[tuple, int] = {}
+    for f in found:
+        per_container[(f["owner"], f["in"])] = per_container.get((f["owner"], f["in"]), 0) + 1
+    rows = []
+    for f in found:
+        rows.append({"list": f["list"], "in": f["in"], "owner": f["owner"], "item": f["item"], "items": f["items"],
+                     "chars": f["chars"], "bytes": packed_bytes(f["list"], f["text"]), "modes": f["modes"],
+                     "decode_blocks": decode_cost(f["cost"], per_container[(f["owner"], f["in"])])})
+    return rows
+
+
+def check_packed_lists(project: dict[str, Any], path: Path | None = None) -> list[dict[str, Any]]:
+    """Decode every packed text in a project (any list item that starts like one): what each
+    rebuilds. A bad one is an :class:`InputError` naming the list (and the project)."""
+    from .pack import PackError, is_packed, unpack
+
+    from .pack import header_name
+
+    found = []
+    # the loader's own list of names (item k of the packed list rebuilds _pk names[k]): names a
+    # text whose header is unreadable
+    expected: list = []
+    for t in project.get("targets", []) or []:
+        for entry in ((t.get("lists") or {}).values() if isinstance(t, dict) else ()):
+            if isinstance(entry, list) and len(entry) >= 2 and entry[0] == "_pk names" and isinstance(entry[1], list):
+                expected = entry[1]
+    for t in project.get("targets", []) or []:
+        if not isinstance(t, dict):
+            continue
+        owner = "Stage" if t.get("isStage") else str(t.get("name"))
+        for entry in (t.get("lists") or {}).values():
+            if not (isinstance(entry, list) and len(entry) >= 2 and isinstance(entry[1], list)):
+                continue
+            for k, text in enumerate(entry[1], start=1):
+                if not is_packed(text):
+                    continue
+                try:
+                    name = header_name(text)
+                    if name is None and k <= len(expected):
+                        name = str(expected[k - 1])
+                    u = unpack(text, name)
+                except PackError as e:
+                    raise InputError(f"{e} (item {k} of list '{entry[0]}' in {owner})", path=path) from None
+                found.append({"list": u.name, "owner": owner, "in": str(entry[0]), "item": k, "text": text,
+                              "items": len(u.items), "chars": u.chars, "modes": u.modes, "cost": u.cost})
+    return found
 
 
 def summary_lines(rep: dict[str, Any], top: int = 15) -> list[str]:
@@ -71,6 +134,12 @@ def summary_lines(rep: dict[str, Any], top: int = 15) -> list[str]:
                      f"({r['items']:,})")
     if len(rep["items"]) > top:
         lines.append(f"  ... {len(rep['items']) - top} more (--json for all)")
+    if rep.get("packed"):
+        lines.append(f"  packed lists (rebuilt at the green flag by the loader; {rep['decode_blocks']:,} blocks "
+                     "in scratch-vm):")
+        for r in rep["packed"]:
+            lines.append(f"  {r['bytes']:>10,}  list '{r['list']}' ({r['owner']}, item {r['item']} of '{r['in']}'): "
+                         f"{r['items']:,} items, {r['decode_blocks']:,} blocks, {', '.join(r['modes'])}")
     for lim in rep["limits"]:
         if not lim["ok"]:
             lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']:,} > {lim['limit']:,}")

@@ -9,6 +9,7 @@ can be dropped into any project with "Upload Sprite".
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,9 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from . import sb3
 from . import readers
+from . import textimage
+from .check import check_packed_lists
+from .loader import LoaderPart, LoaderSpec
 
 
 def _cfg(cfg: Any, key: str, default: Any) -> Any:
@@ -68,17 +72,28 @@ def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
                            tris=names["tris"], ids=names["ids"])
 
 
+def has_textimage(values: dict[str, list]) -> bool:
+    """Did the bake write a TextImage string (a list item starting with the TextImage magic)?"""
+    return any(len(items) and isinstance(items[0], str) and items[0].startswith(textimage.MAGIC + ",")
+               for items in values.values())
+
+
 def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.ReaderSpec:
-    """What the reader can read in these lists."""
+    """The reader for these lists: only the blocks whose lists the bake wrote (a renderer for a
+    mesh, the BSP walk for a BSP tree, the ray query for the BVH layout written, the TextImage
+    decoder for TextImage strings)."""
     n = cfg.names
     mesh = None
     if n.vertices in values and n.triangles in values:
         mesh = readers.MeshNames(verts=n.vertices, tris=n.triangles,
                                  mat_colors=n.materials if n.materials in values else None,
-                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None)
+                                 tri_colors=n.triangle_colors if n.triangle_colors in values else None,
+                                 two_sided=getattr(n, "two_sided", "mat two-sided"))
     cam = auto_camera(values[n.vertices]) if mesh else readers.Camera()
+    two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
     return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),
-                              textimage=True, renderer=True, camera=cam)
+                              textimage=has_textimage(values), renderer=True, camera=cam, two_sided=two,
+                              bounds=readers.bounding_sphere(values[n.vertices]) if mesh else None)
 
 
 def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
@@ -88,8 +103,16 @@ def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
     nodes, planes = art.get("nodes", "bsp nodes"), art.get("planes", "bsp planes")
     if nodes not in values or planes not in values:
         return None
-    return readers.BSPSpec(nodes=nodes, planes=planes,
-                           two_sided=[1 if getattr(m, "double_sided", False) else 0 for m in scene.materials])
+    return readers.BSPSpec(nodes=nodes, planes=planes)
+
+
+def _has_list(project: Path, name: str) -> bool:
+    try:
+        proj, _ = sb3.load_project(project)
+    except InputError:
+        return False  # merge_into reports it
+    return any(isinstance(e, list) and e and e[0] == name for t in proj.get("targets", []) or []
+               if isinstance(t, dict) for e in (t.get("lists") or {}).values())
 
 
 def texture_costumes(scene: Any) -> list[sb3.Costume]:
@@ -103,23 +126,51 @@ def texture_costumes(scene: Any) -> list[sb3.Costume]:
     return out
 
 
+def packed_values(values: dict[str, list], packed: dict[str, Any], packed_name: str) -> dict[str, list]:
+    """The lists as the project stores them: each packed list empty, its text an item of
+    ``packed_name`` (in ``packed``'s order, which the loader follows)."""
+    out = {k: ([] if k in packed else v) for k, v in values.items()}
+    if packed:
+        out[packed_name] = [p.text for p in packed.values()]
+    return out
+
+
+def _with_loader(spec: readers.ReaderSpec | None, packed: dict[str, Any], packed_name: str
+                 ) -> readers.ReaderSpec | None:
+    if not packed:
+        return spec
+    if spec is None:  # no reader asked for: a sprite with the loader alone
+        spec = readers.ReaderSpec(mesh=None, textimage=False, renderer=False)
+    loader = LoaderPart(LoaderSpec(list(packed), packed_name))
+    return dataclasses.replace(spec, parts=list(spec.parts) + [loader])
+
+
+def _has_loader(spec: readers.ReaderSpec | None) -> bool:
+    return spec is not None and any(isinstance(p, LoaderPart) for p in spec.parts)
+
+
 def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
-                    record: Any = None) -> tuple[dict[str, bytes], list[Path]]:
+                    record: Any = None, packed: dict[str, Any] | None = None) -> tuple[dict[str, bytes], list[Path]]:
     """The .sb3 / .sprite3 files of a bake (relative name -> bytes) and the extra input files
-    read (the project baked into)."""
+    read (the project baked into). ``packed``: list name -> :class:`bake.scratch.pack.Packed` for
+    the lists stored packed (with the loader blocks in the reader sprite)."""
     files: dict[str, bytes] = {}
     read: list[Path] = []
+    packed = dict(packed or {})
+    packed_name = cfg.names.packed
     want_reader = bool(_cfg(cfg, "reader", True))
-    spec = reader_spec(scene, cfg, values) if want_reader else None
+    plain_spec = reader_spec(scene, cfg, values) if want_reader else None
+    spec = _with_loader(plain_spec, packed, packed_name)
+    stored = packed_values(values, packed, packed_name)
     details = record.details if record is not None else {}
     costumes = texture_costumes(scene)
     if cfg.sb3:
         sb3_name = _cfg(cfg, "sb3_name", "") or f"{name}.sb3"
         if spec is not None:
-            sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values), demo=True)
+            sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=list(stored), demo=True)
         else:
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
-        targets = [sb3.Target("Stage", is_stage=True, lists=values), sprite]
+        targets = [sb3.Target("Stage", is_stage=True, lists=stored), sprite]
         if costumes:  # the texture costumes, in a hidden sprite of their own for stamping engines
             targets.append(sb3.Target("Textures", costumes=list(costumes), layer_order=2, visible=False))
         data, pj_bytes = sb3.write_sb3(targets)
@@ -128,10 +179,12 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         details["sb3_assets"] = sb3.archive_sizes(data)["assets"]
     if cfg.sprite3:
         if spec is not None:
-            # no green-flag script: a sprite dropped into an engine must not start drawing on its own
-            sprite = readers.reader_target(spec, cfg.sprite_name, local_lists=values)
+            # no green-flag script: a sprite dropped into an engine must not start drawing on its own;
+            # with `load triangle` for authors who copy blocks into their engines
+            sprite = readers.reader_target(dataclasses.replace(spec, helpers=True), cfg.sprite_name,
+                                           local_lists=stored)
         else:
-            sprite = sb3.Target(cfg.sprite_name, lists=values)
+            sprite = sb3.Target(cfg.sprite_name, lists=stored)
         if costumes:
             sprite.costumes = list(sprite.costumes) + list(costumes)
         # named like the .sb3 (export.sb3_name), so the two sit side by side
@@ -147,14 +200,30 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         if Path(out_name).name != out_name:
             raise ConfigError("must be a file name, not a path", key="export.into_name")
         sprites = []
-        if _cfg(cfg, "into_reader", False) and spec is not None:
+        into_spec, into_lists = spec, stored
+        if packed and target != "Stage":
+            # the loader would have to be in the author's sprite that owns the lists
+            if record is not None:
+                record.warn("export.pack needs export.into_target = \"Stage\" (the loader sprite must see the "
+                            f"lists): the lists baked into {src.name} are plain")
+            into_spec, into_lists = plain_spec, dict(values)
+        elif not packed and packed_name not in into_lists and _has_list(src, packed_name):
+            # an earlier packed bake's texts would overwrite these lists at the green flag: empty them
+            into_lists = {**into_lists, packed_name: []}
+        if not _cfg(cfg, "into_reader", False) and _has_loader(into_spec):
+            into_spec = _with_loader(None, packed, packed_name)  # the loader alone
+        elif not _cfg(cfg, "into_reader", False):
+            into_spec = None
+        if into_spec is not None:
             if target != "Stage":
                 if record is not None:
                     record.warn("export.into_reader needs export.into_target = \"Stage\" "
                                 "(a sprite cannot read another sprite's lists): reader not added")
             else:
-                sprites.append(readers.reader_target(spec, cfg.sprite_name, stage_lists=list(values)))
-        data = sb3.merge_into(src, target, values, costumes, sprites=sprites)
+                sprites.append(readers.reader_target(dataclasses.replace(into_spec, helpers=True),
+                                                     cfg.sprite_name, stage_lists=list(into_lists)))
+        data = sb3.merge_into(src, target, into_lists, costumes, sprites=sprites)
+        check_packed_lists(sb3.load_project(data)[0], src)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)
         details["into"] = {"project": str(src), "target": target, "file": out_name,

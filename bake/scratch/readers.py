@@ -1,60 +1,70 @@
 """The reference reader sprite: custom blocks, generated here, that read scratch-bake's lists.
 
+Only what the bake wrote is generated (the spec, built by ``bake.scratch.project.reader_spec``
+from the lists, decides): the renderer when there is a mesh, the BSP walk when there is a BSP
+tree, the ray query for the one BVH layout written (``reader_bvh.py``), the TextImage decoder
+and its 94 costumes only when TextImage strings were written (``reader_textimage.py``). Other
+modules add parts through :attr:`ReaderSpec.parts` (a callable given the :class:`ReaderBuilder`).
+
 Authors can copy these blocks into their own engines. Every block is a custom block with "run
 without screen refresh" (warp) on. Outputs go to variables and lists of the sprite; temporaries
 start with ``_``. Each reader is proven in the real Scratch VM against the Python reference named
-in the last column (tests/scratch/).
+in the last column (tests/scratch/), and the whole project in TurboWarp's player (tests/player/).
 
 ==========================================  ===================================  ======================
 custom block                                what it does                         Python reference
 ==========================================  ===================================  ======================
-``load triangle (t)``                       corners of triangle t into ``x1 y1   the mesh lists
-                                            z1 .. z3``, its colour into ``tri
-                                            color``
-``set camera (x) (y) (z) (yaw) (pitch)``    camera position and angles (deg)
-``project vertices``                        every vertex into the lists ``_px    :func:`project`
-                                            _py _pz`` (screen x, y, depth)
-``bsp walk (x) (y) (z)``                    painter's order (back to front) for  ``bake.bsp.traverse.
-                                            an eye into ``draw order``; single-  draw_order``
-                                            sided triangles facing away are
-                                            left out (``mat two-sided`` says
-                                            which materials are two-sided)
-``draw triangle (t)``                       fills triangle t with the pen: flat  painter's raster
-                                            colour, scanlines at whole y,
-                                            clipped to the stage
-``render``                                  erase all, project, ``draw order``   painter's raster
-                                            = BSP walk from the camera (list
-                                            order without a BSP tree), draw
+(variables)                                 the camera: ``cam x``, ``cam y``,
+                                            ``cam z``, ``cam yaw``, ``cam pitch``
+                                            (degrees), ``focal``, ``near``
+``project vertices``                        every vertex into the lists ``_px    :func:`project`,
+                                            _py _pz`` (screen x, y, depth);      :func:`safe_frame`
+                                            ``_safe`` = 1 when the whole model is
+                                            in front of ``near`` and where the
+                                            pen can draw
+``bsp walk``                                painter's order (back to front) for  ``bake.bsp.traverse.
+                                            the eye at ``cam x``, ``cam y``,     draw_ranges``
+                                            ``cam z``: ``(first, n)`` pairs of
+                                            triangle ranges into ``draw ranges``
+``render``                                  erase all, project, walk (the whole  painter's raster
+                                            list without a BSP tree), fill every
+                                            triangle that faces the camera on
+                                            screen with the pen, in that order
+``load triangle (t)``                       (.sprite3, into-project) corners of  the mesh lists
+                                            triangle t into ``x1 y1 z1 .. z3``,
+                                            its colour into ``tri color``
 ``bvh ray (ox) (oy) (oz) (dx) (dy) (dz)``   closest hit: ``hit tri`` (scene      ``bake.bvh.traverse.
                                             triangle; 0 on a miss), ``hit t``    trace_one``
                                             (-1 on a miss), ``hit u``, ``hit
                                             v``, ``hit slot``
-``decode textimage (text)``                 TextImage v0 -> ``ti colors`` (one   ``bake.textures.
-                                            colour number per pixel, bottom row  textimage.decode``
-                                            first; ARGB with A >= 1 when the
-                                            text has alpha), ``ti width``,
-                                            ``ti height``
+``decode textimage (text)``                 TextImage v0 -> ``ti colors``,       ``bake.textures.
+                                            ``ti width``, ``ti height``          textimage.decode``
 ==========================================  ===================================  ======================
-
-Values typed into blocks are text in Scratch, so an output set to a typed-in number (``hit tri``
-on a miss: ``0``) holds the text "0"; Scratch compares and computes with it as a number.
-
-TextImage characters are turned into numbers case-sensitively with costume names: the sprite has
-one costume per alphabet character ("!" .. "~", costume #1 .. #94), and ``switch costume to
-(letter)`` matches names with ``===`` (scratch.md 4a; ``item # of`` would not tell "A" from "a").
 
 The camera model (the pen renderer and :func:`project` below, which mirrors it bit for bit):
 the frame is x right, y up, z into the screen; the camera at ``(cx, cy, cz)`` turned ``yaw``
 degrees about y (positive turns right) and then ``pitch`` degrees about its x axis (positive looks
 up). With ``d = p - c``: ``x' = dx*cos(yaw) - dz*sin(yaw)``, ``z' = dx*sin(yaw) + dz*cos(yaw)``,
-``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; screen
-``(focal*x'/z'', focal*y''/z'')``. Scratch's ``sin``/``cos`` take degrees and round to 10
-decimals; the reference does the same. A triangle with a corner at depth <= ``near`` is not
-drawn; ``cull backfaces`` = 1 also skips triangles that are counter-clockwise on screen (the BSP
-walk already culls in 3D, so it is 0 by default).
+``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; the stage
+position is ``((dx*(focal*cos(yaw)) - dz*(focal*sin(yaw))) / z'', (dy*(focal*cos(pitch)) -
+z'*(focal*sin(pitch))) / z'')``. Scratch's ``sin``/``cos`` take degrees
+and round to 10 decimals; the reference does the same. ``bake.render.Camera.yaw_pitch`` is the
+same camera for the numpy rasterizer (report.html's "green flag" preview).
 
-What the blocks cost in scratch-vm (blocks executed per frame / per ray / per pixel):
-``benchmarks/bench_scratch_vm.py``.
+The frame (``render``): a triangle is drawn when it is clockwise on the stage (it faces the camera:
+``((bx-ax)*(cy-ay)) - ((by-ay)*(cx-ax)) < 0`` on the projected corners; two-sided materials are
+drawn either way) and its corners are *usable*: deeper than ``near`` and within 4000 pixels of the
+stage centre in x and y (the sprite wears a transparent 8192 x 8192 costume, so Scratch's
+fencing, which keeps a costume's bounds on the stage, never moves the pen there; lines beyond
+the stage are simply not seen). A frame is *safe* when the model's bounding sphere (baked in as
+numbers) is in front of ``near`` and its picture within those 4000 pixels; only an unsafe frame
+tests each vertex (the list ``_bad``). The filler draws the outline (pen size 2: everything
+within half a pixel of an edge is covered fully) and a fan of lines from the first corner, ``n - 1``
+of them with ``n = ceiling(L - L^2 / (2 * area2))`` for the opposite edge's length ``L``, which
+leaves no point farther than half a pixel from a line.
+
+What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
+``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.
 """
 
 from __future__ import annotations
@@ -62,19 +72,22 @@ from __future__ import annotations
 import math
 from decimal import ROUND_HALF_UP, Decimal
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from . import sb3
-from .textimage import ALPHABET, VOLUMES
 from . import blocks as B
-from .blocks import add, div, eq, floor, gt, item, lt, mod, mul, not_, or_, and_, sub, var
+from .blocks import add, div, eq, gt, item, lt, mul, not_, and_, sub, var
+from .reader_bvh import BIG, bvh_part
+from .reader_textimage import alphabet_costumes, textimage_part
 
-# Empty costume for the reader (2x2 transparent; one asset shared by every alphabet costume).
-EMPTY_SVG = sb3.SPRITE_SVG
+__all__ = ["MeshNames", "BVHSpec", "BSPSpec", "Camera", "ReaderSpec", "ReaderBuilder", "reader_target",
+           "project", "scratch_sin", "scratch_cos", "bounding_sphere", "safe_frame", "drawn", "BIG"]
 
-BIG = 1e300  # "no limit" for the ray's farthest distance (docs/formats-bvh.md)
+#: characters of the reader's own variable and list ids (Scratch's are 20; ours appear in every
+#: variable block, so short ids keep the sprite small; derived from the names, never random)
+VAR_ID_LENGTH = 6
 
 
 # --------------------------------------------------------------------------- specs
@@ -84,6 +97,7 @@ class MeshNames:
     tris: str = "tris"
     mat_colors: str | None = "mat colors"
     tri_colors: str | None = "tri colors"
+    two_sided: str = "mat two-sided"  # read from the project when the bake wrote it, else the sprite's own
 
 
 @dataclass
@@ -102,13 +116,10 @@ class BVHSpec:
 
 @dataclass
 class BSPSpec:
-    """The BSP lists (``bake/bsp/encode.py``, docs/formats-bsp.md) and which materials are
-    two-sided (1-based material -> drawn from both sides; written into the sprite as the list
-    ``mat two-sided``, since the lists themselves do not say)."""
+    """The BSP lists (``bake/bsp/encode.py``, docs/formats-bsp.md)."""
 
     nodes: str = "bsp nodes"
     planes: str = "bsp planes"
-    two_sided: list[int] = field(default_factory=list)  # per material: 1 two-sided, 0 not
 
 
 @dataclass
@@ -124,17 +135,25 @@ class Camera:
 
 @dataclass
 class ReaderSpec:
-    """What the reader sprite reads. ``mesh=None`` leaves out the mesh blocks and the renderer;
-    ``bvh=None`` the ray query; ``textimage=False`` the decoder (and its 94 costumes)."""
+    """What the reader sprite reads and holds. ``mesh=None`` leaves out the mesh blocks and the
+    renderer; ``bvh=None`` the ray query; ``textimage=False`` the decoder (and its 94 costumes).
+    ``two_sided``: per material (1-based order), 1 when drawn from both sides (the sprite keeps it
+    as the list ``mat two-sided`` only when some material is). ``bounds``: the model's bounding
+    sphere ``(centre, radius)`` (:func:`bounding_sphere`; None: every frame is unsafe).
+    ``helpers``: also ``load triangle`` (for authors copying blocks). ``parts``: more generators,
+    each called with the :class:`ReaderBuilder` after the built-in ones."""
 
     mesh: MeshNames | None = field(default_factory=MeshNames)
     bvh: BVHSpec | None = None
     bsp: BSPSpec | None = None
-    textimage: bool = True
+    textimage: bool = False
     renderer: bool = True
     camera: Camera = field(default_factory=Camera)
-    cull_backfaces: bool = False
+    two_sided: list[int] = field(default_factory=list)
+    bounds: tuple[tuple[float, float, float], float] | None = None
+    helpers: bool = False
     pen_size: float = 2.0
+    parts: list[Callable[["ReaderBuilder"], None]] = field(default_factory=list)
 
     def lists_read(self) -> list[str]:
         """The data lists the blocks read (they must exist in the project)."""
@@ -146,6 +165,7 @@ class ReaderSpec:
             out += [self.bvh.nodes, self.bvh.tris, self.bvh.ids]
         if self.bsp and self.mesh:
             out += [self.bsp.nodes, self.bsp.planes]
+        out += [n for p in self.parts for n in getattr(p, "lists_read", lambda: [])()]
         return out
 
 
@@ -176,18 +196,81 @@ def project(verts: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.
     dx = v[:, 0] - cam.x
     dy = v[:, 1] - cam.y
     dz = v[:, 2] - cam.z
-    x1 = dx * cy_ - dz * sy_
+    f = float(cam.focal)
     z1 = dx * sy_ + dz * cy_
-    y2 = dy * cp_ - z1 * sp_
     z2 = dy * sp_ + z1 * cp_
     with np.errstate(divide="ignore", invalid="ignore"):
-        px = (cam.focal * x1) / z2
-        py = (cam.focal * y2) / z2
+        px = (dx * (f * cy_) - dz * (f * sy_)) / z2
+        py = (dy * (f * cp_) - z1 * (f * sp_)) / z2
     return px, py, z2
 
 
+#: how far from the stage centre the pen may go: Scratch keeps a sprite's costume bounds on the
+#: stage ("fencing"), so the renderer wears a transparent 8192 x 8192 costume (FENCE_SVG), which
+#: lets it reach 4096 + 240 - 15 pixels right or left (and as far up or down) before fencing moves it
+SAFE_X = SAFE_Y = 4000
+FENCE = 8192
+FENCE_SVG = (f'<svg xmlns="http://www.w3.org/2000/svg" width="{FENCE}" height="{FENCE}" '
+             f'viewBox="0 0 {FENCE} {FENCE}"></svg>').encode()
+
+
+def bounding_sphere(verts: Sequence[float] | np.ndarray) -> tuple[tuple[float, float, float], float]:
+    """A sphere around the model for the safe-frame test: the bounding box's centre, the distance
+    to the farthest vertex, both rounded outwards to 6 significant digits (they become literals)."""
+    v = np.asarray(verts, np.float64).reshape(-1, 3)
+    if not len(v):
+        return (0.0, 0.0, 0.0), 0.0
+    c = np.array([float(f"{x:.6g}") for x in (v.min(0) + v.max(0)) / 2])
+    rad = float(np.sqrt(((v - c) ** 2).sum(1)).max())
+    rad = float(f"{rad * (1 + 1e-5) + 1e-300:.6g}")
+    return (float(c[0]), float(c[1]), float(c[2])), rad
+
+
+def usable(px, py, pz, near: float) -> np.ndarray:
+    """Per vertex: in front of ``near`` and where the pen can go (the reader's test)."""
+    return (pz > near) & (np.abs(px) < SAFE_X) & (np.abs(py) < SAFE_Y)
+
+
+def safe_frame(cam: Camera, bounds: tuple[tuple[float, float, float], float] | None) -> bool:
+    """The reader's ``_safe`` for this camera and bounding sphere (its arithmetic)."""
+    if bounds is None:
+        return False
+    (qx, qy, qz), rad = bounds
+    sy_, cy_ = _sc(cam.yaw)
+    sp_, cp_ = _sc(cam.pitch)
+    dx, dy, dz = qx - cam.x, qy - cam.y, qz - cam.z
+    depth = (dy * sp_ + (dx * sy_ + dz * cy_) * cp_) - rad
+    return bool(depth > cam.near and cam.focal * (math.sqrt((dx * dx + dy * dy) + dz * dz) + rad) < SAFE_X * depth)
+
+
+def drawn(verts, tris, cam: Camera, two_sided: Sequence[int] = ()) -> np.ndarray:
+    """Per triangle (0-based): does ``render`` fill it (faces the camera on the stage, or is
+    two-sided, and every corner usable)? The reader's arithmetic, bit for bit."""
+    px, py, pz = project(verts, cam)
+    t = np.asarray(tris, np.int64).reshape(-1, 4)
+    i = t[:, :3] - 1
+    ax, ay, bx, by, cx, cy = px[i[:, 0]], py[i[:, 0]], px[i[:, 1]], py[i[:, 1]], px[i[:, 2]], py[i[:, 2]]
+    a = ((bx - ax) * (cy - ay)) - ((by - ay) * (cx - ax))
+    two = np.asarray(list(two_sided) + [0], np.int64)[np.clip(t[:, 3] - 1, 0, max(len(two_sided), 0))] == 1 \
+        if len(two_sided) else np.zeros(len(t), bool)
+    a = np.where(two, -np.abs(a), a)
+    ok = usable(px, py, pz, cam.near)
+    return (a < 0) & ok[i].all(1)
+
+
 # --------------------------------------------------------------------------- building
-class _Reader:
+class ReaderBuilder:
+    """What a part generator writes into: the sprite's variables, lists and custom blocks.
+
+    ``v(name, init)`` declares a variable of the sprite and returns its reporter; ``lst(name,
+    init)`` a list (a data list of the project is used as it is); ``set``/``change`` are the
+    variable blocks (declaring the variable); ``define(proccode, args, body)`` adds a custom
+    block (warp on); ``at_flag(nodes)`` adds blocks to the green-flag script of the .sb3, which
+    runs them before it renders (and renders only if ``flag_guard``, when a part sets one);
+    ``has(proccode)`` says whether a block is already defined; ``alphabet = True`` gives the sprite
+    the 94 character costumes (costume k + 1 is ``"!" .. "~"``[k], read case-sensitively by
+    ``switch costume to (letter)``)."""
+
     def __init__(self, spec: ReaderSpec, scope_lists: dict[str, str], stage_lists: dict[str, str],
                  target: str):
         self.spec = spec
@@ -197,6 +280,9 @@ class _Reader:
         self.scope_lists = dict(scope_lists)
         self.stage_lists = dict(stage_lists)
         self.procs: list[tuple[str, list[str], list[B.Node]]] = []
+        self.flag: list[B.Node] = []
+        self.flag_guard: B.Boolean | None = None  # the green flag renders only when this holds
+        self.alphabet = False  # a part reads characters through the 94 alphabet costumes
 
     def v(self, name: str, init: Any = 0) -> B.VarRef:
         self.vars.setdefault(name, init)
@@ -218,22 +304,25 @@ class _Reader:
     def define(self, proccode: str, args: list[str], body: list[B.Node]) -> None:
         self.procs.append((proccode, args, body))
 
+    def has(self, proccode: str) -> bool:
+        return any(p == proccode for p, _, _ in self.procs)
+
+    def at_flag(self, nodes: list[B.Node]) -> None:
+        self.flag.extend(nodes)
+
 
 def _le(a, b) -> B.Boolean:
     """a <= b  (Scratch has no <=: not (a > b))."""
     return not_(gt(a, b))
 
 
-def _ge(a, b) -> B.Boolean:
-    return not_(lt(a, b))
+def _two_sided(spec: ReaderSpec) -> bool:
+    return any(int(x) for x in spec.two_sided)
 
 
-# ---- mesh
-def _mesh_blocks(r: _Reader) -> None:
+# ---- mesh helper (authors' block)
+def _load_triangle(r: ReaderBuilder) -> None:
     m = r.spec.mesh
-    assert m is not None
-    r.lst(m.verts)
-    r.lst(m.tris)
     t = B.arg("t")
     base = r.v("_b")
     body: list[B.Node] = [r.set("_b", mul(4, sub(t, 1)))]
@@ -243,662 +332,214 @@ def _mesh_blocks(r: _Reader) -> None:
         ik = r.v(f"_i{k}")
         for a, axis in enumerate("xyz"):
             body.append(r.set(f"{axis}{k}", item(add(ik, a + 1), m.verts)))
-    if m.tri_colors:
-        r.lst(m.tri_colors)
-        body.append(r.set("tri color", item(t, m.tri_colors)))
-    elif m.mat_colors:
-        r.lst(m.mat_colors)
-        body.append(r.set("tri color", item(item(add(base, 4), m.tris), m.mat_colors)))
-    else:
-        body.append(r.set("tri color", 0))
+    body.append(r.set("tri color", _colour(r, t, base)))
     r.define("load triangle %s", ["t"], body)
 
 
-# ---- camera, projection, pen renderer
-def _camera_blocks(r: _Reader) -> None:
+def _colour(r: ReaderBuilder, t, base) -> Any:
+    """The colour number of triangle t (tris items from ``base`` + 1): its own, its material's."""
+    m = r.spec.mesh
+    if m.tri_colors:
+        return item(t, r.lst(m.tri_colors))
+    if m.mat_colors:
+        return item(item(add(base, 4), m.tris), r.lst(m.mat_colors))
+    return "#808080"
+
+
+# ---- camera and projection
+def _camera_blocks(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     cam = r.spec.camera
     for n, val in (("cam x", cam.x), ("cam y", cam.y), ("cam z", cam.z), ("cam yaw", cam.yaw),
                    ("cam pitch", cam.pitch), ("focal", cam.focal), ("near", cam.near)):
         r.v(n, val)
-    r.v("cull backfaces", 1 if r.spec.cull_backfaces else 0)
-    r.define("set camera %s %s %s %s %s", ["x", "y", "z", "yaw", "pitch"], [
-        r.set("cam x", B.arg("x")), r.set("cam y", B.arg("y")), r.set("cam z", B.arg("z")),
-        r.set("cam yaw", B.arg("yaw")), r.set("cam pitch", B.arg("pitch")),
-    ])
-    px, py, pz = r.lst("_px"), r.lst("_py"), r.lst("_pz")
+    px, py, pz, bad = r.lst("_px"), r.lst("_py"), r.lst("_pz"), r.lst("_bad")
     i = r.v("_i")
-    dx, dy, dz, x1, z1, y2, z2 = (r.v(n) for n in ("_dx", "_dy", "_dz", "_x1", "_z1", "_y2", "_z2"))
+    dx, dy, dz, z1, z2 = (r.v(n) for n in ("_dx", "_dy", "_dz", "_z1", "_z2"))
     syw, cyw, spt, cpt = (r.v(n) for n in ("_syaw", "_cyaw", "_spitch", "_cpitch"))
+    near = r.v("near")
+    nverts = div(B.list_length(m.verts), 3)
+
+    def unusable(v):  # vertex v behind near, or farther from the centre than the pen may go
+        return not_(and_(gt(item(v, pz), near), and_(lt(B.abs_(item(v, px)), SAFE_X), lt(B.abs_(item(v, py)), SAFE_Y))))
+
+    # the safe-frame test: the model's bounding sphere (centre, radius: spec.bounds) is in front of
+    # near and its picture within SAFE_X of the centre; in an unsafe frame, which vertices are
+    # unusable (1) into _bad, read by the filler
+    (qx, qy, qz), rad = r.spec.bounds if r.spec.bounds is not None else ((0.0, 0.0, 0.0), BIG)
+    depth = sub(z2, rad)  # the sphere's nearest depth
+    safe = [
+        r.set("_dx", sub(qx, var("cam x"))), r.set("_dy", sub(qy, var("cam y"))), r.set("_dz", sub(qz, var("cam z"))),
+        r.set("_z2", add(mul(dy, spt), mul(add(mul(dx, syw), mul(dz, cyw)), cpt))),
+        r.set("_safe", 0),
+        # |screen x| <= focal * (distance + radius) / (depth - radius), the same for y
+        B.if_(and_(gt(depth, near), lt(mul(var("focal"), add(B.sqrt(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz))), rad)),
+                                      mul(SAFE_X, depth))), [r.set("_safe", 1)]),
+        B.delete_all(bad),
+        B.if_(eq(var("_safe"), 0), [
+            r.set("_i", 1),
+            B.repeat(nverts, [B.if_(unusable(i), [B.add_to(bad, 1)], [B.add_to(bad, 0)]), r.change("_i", 1)]),
+        ]),
+    ]
     r.define("project vertices", [], [
         r.set("_syaw", B.mathop("sin", var("cam yaw"))), r.set("_cyaw", B.mathop("cos", var("cam yaw"))),
         r.set("_spitch", B.mathop("sin", var("cam pitch"))), r.set("_cpitch", B.mathop("cos", var("cam pitch"))),
+        # the screen's scale folded into the turn: focal * cos, focal * sin
+        r.set("_fcy", mul(var("focal"), cyw)), r.set("_fsy", mul(var("focal"), syw)),
+        r.set("_fcp", mul(var("focal"), cpt)), r.set("_fsp", mul(var("focal"), spt)),
         B.delete_all(px), B.delete_all(py), B.delete_all(pz),
         r.set("_i", 1),
-        B.repeat(div(B.list_length(m.verts), 3), [
+        B.repeat(nverts, [
             r.set("_dx", sub(item(i, m.verts), var("cam x"))),
             r.set("_dy", sub(item(add(i, 1), m.verts), var("cam y"))),
             r.set("_dz", sub(item(add(i, 2), m.verts), var("cam z"))),
-            r.set("_x1", sub(mul(dx, cyw), mul(dz, syw))),
             r.set("_z1", add(mul(dx, syw), mul(dz, cyw))),
-            r.set("_y2", sub(mul(dy, cpt), mul(z1, spt))),
             r.set("_z2", add(mul(dy, spt), mul(z1, cpt))),
-            B.add_to(px, div(mul(var("focal"), x1), z2)),
-            B.add_to(py, div(mul(var("focal"), y2), z2)),
             B.add_to(pz, z2),
+            B.add_to(px, div(sub(mul(dx, var("_fcy")), mul(dz, var("_fsy"))), z2)),
+            B.add_to(py, div(sub(mul(dy, var("_fcp")), mul(z1, var("_fsp"))), z2)),
             r.change("_i", 3),
         ]),
+        *safe,
     ])
 
-    # draw triangle (t): scanline fill of the projected triangle, rows at whole y, clipped to the
-    # stage (the sprite is fenced to the stage in the editor, so we never move it far outside)
-    t = B.arg("t")
-    ax, ay, bx, by, cx, cy, tmp = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy", "_tmp"))
-    ry, xl, xs, x0, xe = (r.v(n) for n in ("_ry", "_xl", "_xs", "_x0", "_x1s"))
+
+# ---- the frame
+def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
+    """Fill the triangle whose ``tris`` items follow item ``_b`` (see the module docstring)."""
+    m = r.spec.mesh
+    px, py, bad = "_px", "_py", "_bad"
     b = r.v("_b")
-
-    def swap(p: str, q: str) -> list[B.Node]:
-        return [r.set("_tmp", var(p)), r.set(p, var(q)), r.set(q, tmp)]
-
-    def corner(k: int) -> list[B.Node]:
-        name = "abc"[k - 1]
+    ax, ay, bx, by, cx, cy = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
+    a2 = r.v("_a")
+    load: list[B.Node] = []
+    for k, name in ((1, "a"), (2, "b"), (3, "c")):
         ik = r.v(f"_i{k}")
-        return [r.set(f"_i{k}", item(add(b, k), m.tris)),
-                r.set(f"_{name}x", item(ik, px)), r.set(f"_{name}y", item(ik, py))]
-
-    near = var("near")
-    visible = and_(and_(gt(item(var("_i1"), pz), near), gt(item(var("_i2"), pz), near)),
-                   gt(item(var("_i3"), pz), near))
-    area = sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))
-    row = [
-        # x on the long edge a-c and on the short edge (a-b below b, b-c from b up)
-        r.set("_xl", add(ax, div(mul(sub(cx, ax), sub(ry, ay)), sub(cy, ay)))),
-        B.if_(lt(ry, by),
-              [r.set("_xs", add(ax, div(mul(sub(bx, ax), sub(ry, ay)), sub(by, ay))))],
-              [B.if_(eq(cy, by), [r.set("_xs", bx)],
-                     [r.set("_xs", add(bx, div(mul(sub(cx, bx), sub(ry, by)), sub(cy, by))))])]),
-        B.if_(lt(xs, xl), swap("_xs", "_xl")),
-        r.set("_x0", xl), r.set("_x1s", xs),
-        B.if_(lt(x0, -240), [r.set("_x0", -240)]),
-        B.if_(gt(xe, 240), [r.set("_x1s", 240)]),
-        B.if_(_le(x0, xe), [B.goto_xy(x0, ry), B.pen_down(), B.goto_xy(xe, ry), B.pen_up()]),
-        r.change("_ry", 1),
-    ]
-    r.define("draw triangle %s", ["t"], [
-        r.set("_b", mul(4, sub(t, 1))),
-        *corner(1), *corner(2), *corner(3),
-        B.if_(visible, [
-            B.if_(or_(eq(var("cull backfaces"), 0), lt(area, 0)), [
-                # sort the corners by y: a lowest, c highest
-                B.if_(lt(by, ay), swap("_ax", "_bx") + swap("_ay", "_by")),
-                B.if_(lt(cy, by), swap("_bx", "_cx") + swap("_by", "_cy")),
-                B.if_(lt(by, ay), swap("_ax", "_bx") + swap("_ay", "_by")),
-                B.if_(gt(cy, ay), [
-                    r.set("_ry", B.mathop("ceiling", ay)),
-                    B.if_(lt(ry, -180), [r.set("_ry", -180)]),
-                    r.set("_ytop", B.mathop("floor", cy)),
-                    B.if_(gt(var("_ytop"), 180), [r.set("_ytop", 180)]),
-                    B.if_(_le(ry, var("_ytop")), [
-                        _load_color(r, t),
-                        B.repeat(add(sub(var("_ytop"), ry), 1), row),
-                    ]),
-                ]),
+        load += [r.set(f"_i{k}", item(add(b, k), m.tris)),
+                 r.set(f"_{name}x", item(ik, px)), r.set(f"_{name}y", item(ik, py))]
+    load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
+    if _two_sided(r.spec):
+        two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
+        load.append(B.if_(eq(item(item(add(b, 4), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
+    unusable = gt(add(add(item(var("_i1"), bad), item(var("_i2"), bad)), item(var("_i3"), bad)), 0)
+    load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
+    colour = B.set_pen_color(_colour(r, add(div(b, 4), 1), b))
+    # the outline, then a fan from a to n - 1 points along b-c
+    dx, dy, l2, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_l2", "_n", "_x", "_y"))
+    fill = [
+        colour,
+        B.goto_xy(ax, ay), B.pen_down(), B.goto_xy(bx, by), B.goto_xy(cx, cy), B.goto_xy(ax, ay),
+        # n <= 1 whenever 2 * area <= 2 (the largest L - L^2 / (2 * area2) is area2 / 2)
+        B.if_(lt(a2, -2), [
+            r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
+            r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
+            r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
+            B.if_(gt(n, 1), [
+                # zigzag: a -> p1 -> p2 -> a -> p3 -> p4 -> a ... (p2k-1 -> p2k runs along b-c);
+                # repeat rounds (n - 1) / 2 up, so with n - 1 odd the last point is p_n = c
+                r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
+                B.repeat(div(sub(n, 1), 2), [
+                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
             ]),
         ]),
-    ])
+        B.pen_up(),
+    ]
+    return load + [B.if_(lt(a2, 0), fill)]
 
-    order = r.lst("draw order")
-    k = r.v("_k")
-    walk: list[B.Node]
+
+def _render_blocks(r: ReaderBuilder) -> None:
+    m = r.spec.mesh
+    b, k = r.v("_b"), r.v("_k")
+    fill = _fill_blocks(r)
+    start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size)]
+    # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
+    start.append(B.switch_costume("fence"))
+    start.append(B.call("project vertices"))
     if r.spec.bsp is not None:
-        _bsp_blocks(r)
-        walk = [B.call("bsp walk %s %s %s", var("cam x"), var("cam y"), var("cam z"))]
-    else:
-        walk = [B.delete_all(order), r.set("_k", 1),
-                B.repeat(div(B.list_length(m.tris), 4), [B.add_to(order, k), r.change("_k", 1)])]
-    r.define("render", [], [
-        B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size),
-        B.call("project vertices"),
-        *walk,
-        r.set("_k", 1),
-        B.repeat(B.list_length(order), [B.call("draw triangle %s", item(k, order)), r.change("_k", 1)]),
-    ])
+        ranges = r.lst("draw ranges")
+        frame = [
+            B.call("bsp walk"),
+            r.set("_k", 1),
+            B.repeat(div(B.list_length(ranges), 2), [
+                r.set("_b", sub(mul(item(k, ranges), 4), 4)),
+                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", 4)]),
+                r.change("_k", 2),
+            ]),
+        ]
+    else:  # no tree: the list's order
+        frame = [r.set("_b", 0), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 4)])]
+    r.define("render", [], start + frame)
 
 
 # ---- BSP
-def _bsp_blocks(r: _Reader) -> None:
-    """``bsp walk (x) (y) (z)``: the painter's order for an eye, into ``draw order`` (back to
-    front), single-sided triangles facing away left out. The walk of docs/formats-bsp.md with an
-    explicit stack (a record's item number to visit, or its negated item number for "draw its
-    coplanar triangles now"), with the arithmetic of its Python model
-    ``bake.bsp.traverse.draw_order``: the plane test is ``((a*x + b*y) + c*z) - d >= 0``. The lists
-    do not say which materials are two-sided, so the sprite carries ``mat two-sided``."""
-    m, s = r.spec.mesh, r.spec.bsp
+def _bsp_blocks(r: ReaderBuilder) -> None:
+    """``bsp walk``: the painter's order for the eye at (``cam x``, ``cam y``, ``cam z``), as
+    ``(first, n)`` pairs in ``draw ranges`` (back to front). The walk of docs/formats-bsp.md with
+    an explicit stack (a 0 at the bottom ends it; a record's item number to visit, or the negated
+    item of a ready-made range), with the arithmetic of its Python model
+    ``bake.bsp.traverse.draw_ranges``: the plane test is ``((a*x + b*y) + c*z) - d >= 0``."""
+    s = r.spec.bsp
     nodes, planes = r.lst(s.nodes), r.lst(s.planes)
-    order, stack = r.lst("draw order"), r.lst("_bsp stack")
-    two = r.lst("mat two-sided", list(s.two_sided))
-    ex, ey, ez = r.v("_ex"), r.v("_ey"), r.v("_ez")
-    rr, T, bb, first, na, nd, nb = (r.v(x) for x in ("_r", "_T", "_B", "_first", "_nA", "_nD", "_nB"))
-    front, near, far, faces, t = r.v("_front"), r.v("_near"), r.v("_far"), r.v("_faces"), r.v("_bt")
-    pl = r.v("_pl")
+    ranges, stack = r.lst("draw ranges"), r.lst("_bsp stack")
+    for n, val in (("cam x", r.spec.camera.x), ("cam y", r.spec.camera.y), ("cam z", r.spec.camera.z)):
+        r.v(n, val)
+    rr, T, bb, fr, nr, g, nx = (r.v(x) for x in ("_r", "_T", "_B", "_front", "_near", "_g", "_next"))
 
-    # eye in front of (or on) the plane of split record (r): a*x + b*y + c*z - d >= 0
-    r.define("_bsp side %s", ["r"], [
-        r.set("_pl", mul(sub(B.abs_(item(B.arg("r"), nodes)), 2), 4)),
-        B.if_(lt(sub(add(add(mul(item(add(pl, 1), planes), ex), mul(item(add(pl, 2), planes), ey)),
-                         mul(item(add(pl, 3), planes), ez)), item(add(pl, 4), planes)), 0),
-              [r.set("_front", 0)], [r.set("_front", 1)]),
-    ])
-    # triangle (t) faces the eye, or its material is two-sided
-    P = [[r.v(f"_b{c}{a}") for a in "xyz"] for c in range(3)]
-    u = [r.v(f"_bu{a}") for a in "xyz"]
-    w = [r.v(f"_bw{a}") for a in "xyz"]
-    nv = [r.v(f"_bn{a}") for a in "xyz"]
-    tb = r.v("_tb4")
-    faces_body: list[B.Node] = [r.set("_tb4", mul(sub(B.arg("t"), 1), 4))]
-    faces_body.append(B.if_(eq(item(item(add(tb, 4), m.tris), two), 1), [r.set("_faces", 1)], [
-        *[r.set(f"_b{c}{a}", item(add(mul(sub(item(add(tb, c + 1), m.tris), 1), 3), k + 1), m.verts))
-          for c in range(3) for k, a in enumerate("xyz")],
-        *[r.set(f"_bu{a}", sub(P[1][k], P[0][k])) for k, a in enumerate("xyz")],
-        *[r.set(f"_bw{a}", sub(P[2][k], P[0][k])) for k, a in enumerate("xyz")],
-        r.set("_bnx", sub(mul(u[1], w[2]), mul(u[2], w[1]))),
-        r.set("_bny", sub(mul(u[2], w[0]), mul(u[0], w[2]))),
-        r.set("_bnz", sub(mul(u[0], w[1]), mul(u[1], w[0]))),
-        B.if_(gt(add(add(mul(nv[0], sub(ex, P[0][0])), mul(nv[1], sub(ey, P[0][1]))), mul(nv[2], sub(ez, P[0][2]))), 0),
-              [r.set("_faces", 1)], [r.set("_faces", 0)]),
-    ]))
-    r.define("_bsp faces %s", ["t"], faces_body)
-    # draw triangles first .. first + n - 1 (culled: only those facing the eye)
-    r.define("_bsp draw %s %s %s", ["first", "n", "culled"], [
-        r.set("_bt", B.arg("first")),
-        B.repeat(B.arg("n"), [
-            B.if_(eq(B.arg("culled"), 1), [
-                B.call("_bsp faces %s", t),
-                B.if_(eq(faces, 1), [B.add_to(order, t)]),
-            ], [B.add_to(order, t)]),
-            r.change("_bt", 1),
-        ]),
-    ])
-    item_r = lambda k: item(add(rr, k), nodes)  # noqa: E731
-    deferred = [
-        r.set("_r", sub(0, rr)),
-        r.set("_T", item(rr, nodes)),
-        B.if_(eq(T, 1), [B.call("_bsp draw %s %s %s", add(item_r(1), item_r(2)), item_r(3), 1)], [
-            r.set("_first", item_r(2)), r.set("_nA", item_r(3)),
-            B.if_(gt(T, 0), [r.set("_nD", 0), r.set("_nB", item_r(4))],
-                  [r.set("_nD", item_r(4)), r.set("_nB", item_r(5))]),
-            B.call("_bsp side %s", rr),
-            B.if_(eq(front, 1), [B.call("_bsp draw %s %s %s", first, add(na, nd), 0)],
-                  [B.call("_bsp draw %s %s %s", add(first, na), add(nd, nb), 0)]),
-        ]),
+    def at(k):  # item (r + k) of nodes
+        return item(add(rr, k), nodes)
+
+    def plane(k):  # item (T - k) of planes
+        return item(sub(T, k), planes)
+
+    front = not_(lt(sub(add(add(mul(plane(3), var("cam x")), mul(plane(2), var("cam y"))),
+                            mul(plane(1), var("cam z"))), item(T, planes)), 0))
+    split = [
+        r.set("_B", at(1)),
+        B.if_(lt(bb, 0), [r.set("_front", 0), r.set("_B", sub(0, bb))], [r.set("_front", add(rr, 6))]),
+        B.if_(front, [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 2))],
+              [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 4))]),
+        B.if_(gt(nr, 0), [B.add_to(stack, nr)]),
+        B.if_(gt(item(add(g, 1), nodes), 0), [B.add_to(stack, sub(0, g))]),
+        r.set("_g", 0),
     ]
-    visit = [
-        r.set("_T", item(rr, nodes)),
-        B.if_(eq(T, 0), [B.call("_bsp draw %s %s %s", item_r(1), item_r(2), 1)], [
-            B.if_(eq(T, 1), [
-                B.call("_bsp draw %s %s %s", item_r(1), item_r(2), 1),
-                B.add_to(stack, sub(0, rr)), B.add_to(stack, add(rr, 4)),
-            ], [
-                r.set("_B", item_r(1)),
-                B.if_(lt(bb, 0), [r.set("_near", 0)],  # _near holds the front child for now
-                      [B.if_(gt(T, 0), [r.set("_near", add(rr, 5))], [r.set("_near", add(rr, 6))])]),
-                B.if_(gt(bb, 0), [r.set("_far", bb)], [B.if_(lt(bb, 0), [r.set("_far", sub(0, bb))],
-                                                               [r.set("_far", 0)])]),
-                B.call("_bsp side %s", rr),
-                B.if_(eq(front, 0), [  # eye behind: the back child is near
-                    r.set("_T", near), r.set("_near", far), r.set("_far", T)]),
-                B.if_(gt(near, 0), [B.add_to(stack, near)]),
-                B.add_to(stack, sub(0, rr)),
-                B.if_(gt(far, 0), [B.add_to(stack, far)]),
+    r.define("bsp walk", [], [
+        B.delete_all(ranges), B.delete_all(stack), B.add_to(stack, 0),
+        r.set("_r", 0),
+        B.if_(gt(B.list_length(nodes), 0), [r.set("_r", 1)]),
+        B.repeat_until(eq(rr, 0), [
+            r.set("_g", sub(0, rr)),  # r < 0: the range at item -r
+            r.set("_next", 0),
+            B.if_(gt(rr, 0), [
+                r.set("_T", item(rr, nodes)),
+                B.if_(lt(T, 2), [  # a leaf or a peel: its (first) range now
+                    r.set("_g", add(rr, 1)),
+                    B.if_(eq(T, 1), [B.add_to(stack, sub(0, add(rr, 3))), r.set("_next", add(rr, 5))]),
+                ], split),
             ]),
+            B.if_(gt(g, 0), [B.add_to(ranges, item(g, nodes)), B.add_to(ranges, item(add(g, 1), nodes))]),
+            B.if_(gt(nx, 0), [r.set("_r", nx)], [r.set("_r", item("last", stack)), B.delete_item(stack, "last")]),
         ]),
-    ]
-    r.define("bsp walk %s %s %s", ["x", "y", "z"], [
-        r.set("_ex", B.arg("x")), r.set("_ey", B.arg("y")), r.set("_ez", B.arg("z")),
-        B.delete_all(order), B.delete_all(stack),
-        B.if_(gt(B.list_length(nodes), 0), [B.add_to(stack, 1)]),
-        B.repeat_until(eq(B.list_length(stack), 0), [
-            r.set("_r", item("last", stack)), B.delete_item(stack, "last"),
-            B.if_(lt(rr, 0), deferred, visit),
-        ]),
-    ])
-
-
-def _load_color(r: _Reader, t: B.Node) -> B.Node:
-    m = r.spec.mesh
-    if m.tri_colors:
-        return B.set_pen_color(item(t, m.tri_colors))
-    if m.mat_colors:
-        return B.set_pen_color(item(item(add(var("_b"), 4), m.tris), m.mat_colors))
-    return B.set_pen_color("#808080")
-
-
-# ---- BVH
-def _bvh_blocks(r: _Reader) -> None:
-    s = r.spec.bvh
-    assert s is not None
-    BARY_LO, BARY_HI = s.bary
-    nodes, tris, ids = r.lst(s.nodes), r.lst(s.tris), r.lst(s.ids)
-    o = [r.v(f"_o{a}") for a in "xyz"]
-    d = [r.v(f"_d{a}") for a in "xyz"]
-    inv = [r.v(f"_i{a}") for a in "xyz"]
-    near = [r.v(f"_s{a}") for a in "xyz"]
-    best, hit = r.v("_best"), r.v("_hit")
-    tn, tf, n, f, bh = (r.v(x) for x in ("_tn", "_tf", "_n", "_f", "_bh"))
-    for name in ("hit t", "hit tri", "hit u", "hit v", "hit slot"):
-        r.v(name)
-
-    def box_test(get) -> list[B.Node]:
-        """``get(k)`` -> expression for box value b(k), k an expression 1..6. Sets _bh, _tn."""
-        body = [
-            r.set("_tn", mul(sub(get(add(1, near[0])), o[0]), inv[0])),
-            r.set("_tf", mul(sub(get(sub(4, near[0])), o[0]), inv[0])),
-        ]
-        for a in (1, 2):
-            body += [
-                r.set("_n", mul(sub(get(add(1 + a, near[a])), o[a]), inv[a])),
-                r.set("_f", mul(sub(get(sub(4 + a, near[a])), o[a]), inv[a])),
-                B.if_(gt(n, tn), [r.set("_tn", n)]),
-                B.if_(lt(f, tf), [r.set("_tf", f)]),
-            ]
-        body.append(B.if_(and_(and_(_le(tn, tf), _ge(tf, 0)), _le(tn, best)),
-                          [r.set("_bh", 1)], [r.set("_bh", 0)]))
-        return body
-
-    p = r.v("_p")
-    box = r.lst("_bvh box", [0] * 6)
-    r.define("_bvh box at %s", ["p"], box_test(lambda k: item(add(B.arg("p"), sub(k, 1)), nodes)))
-    r.define("_bvh box", [], box_test(lambda k: item(k, box)))
-
-    # Möller-Trumbore, double-sided, exactly the order of docs/formats-bvh.md; the inside test
-    # has the reference's tolerance (u >= -1e-09 ...: typed-in numbers, no extra blocks)
-    kk = r.v("_tk")
-    V = {}
-    for ci in range(3):
-        for a, axis in enumerate("xyz"):
-            V[(ci, a)] = r.v(f"_v{ci}{axis}")
-    e1 = [r.v(f"_e1{a}") for a in "xyz"]
-    e2 = [r.v(f"_e2{a}") for a in "xyz"]
-    pv = [r.v(f"_pv{a}") for a in "xyz"]
-    sv = [r.v(f"_s{a}v") for a in "xyz"]
-    qv = [r.v(f"_q{a}") for a in "xyz"]
-    det, tinv, u, vv, t = (r.v(x) for x in ("_det", "_inv", "_u", "_v", "_t"))
-
-    def dot3(a, b3):
-        return add(add(mul(a[0], b3[0]), mul(a[1], b3[1])), mul(a[2], b3[2]))
-
-    tri_body: list[B.Node] = [r.set("_tk", mul(sub(B.arg("s"), 1), 9))]
-    for ci in range(3):
-        for a, axis in enumerate("xyz"):
-            tri_body.append(r.set(f"_v{ci}{axis}", item(add(kk, 3 * ci + a + 1), tris)))
-    for a, axis in enumerate("xyz"):
-        tri_body.append(r.set(f"_e1{axis}", sub(V[(1, a)], V[(0, a)])))
-    for a, axis in enumerate("xyz"):
-        tri_body.append(r.set(f"_e2{axis}", sub(V[(2, a)], V[(0, a)])))
-    tri_body += [
-        r.set("_pvx", sub(mul(d[1], e2[2]), mul(d[2], e2[1]))),
-        r.set("_pvy", sub(mul(d[2], e2[0]), mul(d[0], e2[2]))),
-        r.set("_pvz", sub(mul(d[0], e2[1]), mul(d[1], e2[0]))),
-        r.set("_det", dot3(e1, pv)),
-        B.if_(gt(mul(det, det), mul(1e-12, mul(dot3(e1, e1), dot3(pv, pv)))), [
-            r.set("_inv", div(1, det)),
-            r.set("_sxv", sub(o[0], V[(0, 0)])),
-            r.set("_syv", sub(o[1], V[(0, 1)])),
-            r.set("_szv", sub(o[2], V[(0, 2)])),
-            r.set("_u", mul(dot3(sv, pv), tinv)),
-            B.if_(and_(_ge(u, BARY_LO), _le(u, BARY_HI)), [
-                r.set("_qx", sub(mul(sv[1], e1[2]), mul(sv[2], e1[1]))),
-                r.set("_qy", sub(mul(sv[2], e1[0]), mul(sv[0], e1[2]))),
-                r.set("_qz", sub(mul(sv[0], e1[1]), mul(sv[1], e1[0]))),
-                r.set("_v", mul(dot3(d, qv), tinv)),
-                B.if_(and_(_ge(vv, BARY_LO), _le(add(u, vv), BARY_HI)), [
-                    r.set("_t", mul(dot3(e2, qv), tinv)),
-                    B.if_(and_(gt(t, 0), lt(t, best)), [
-                        r.set("_best", t), r.set("_hit", B.arg("s")),
-                        r.set("hit u", u), r.set("hit v", vv),
-                    ]),
-                ]),
-            ]),
-        ]),
-    ]
-    r.define("_bvh triangle %s", ["s"], tri_body)
-
-    setup: list[B.Node] = []
-    for a, axis in enumerate("xyz"):
-        setup += [r.set(f"_o{axis}", B.arg(f"o{axis}")), r.set(f"_d{axis}", B.arg(f"d{axis}"))]
-    for a, axis in enumerate("xyz"):
-        setup += [
-            B.if_(lt(B.abs_(d[a]), 1e-30), [r.set(f"_i{axis}", 1e30)], [r.set(f"_i{axis}", div(1, d[a]))]),
-            B.if_(lt(inv[a], 0), [r.set(f"_s{axis}", 3)], [r.set(f"_s{axis}", 0)]),
-        ]
-    setup += [r.set("_best", BIG), r.set("_hit", 0), r.set("hit u", 0), r.set("hit v", 0)]
-
-    sl, link = r.v("_sl"), r.v("_link")
-    if s.layout == "binary":
-        walk = [
-            r.set("_p", 1),
-            B.repeat_until(gt(p, B.list_length(nodes)), [
-                B.call("_bvh box at %s", p),
-                r.set("_link", item(add(p, 6), nodes)),
-                B.if_(eq(bh, 1), [
-                    B.if_(gt(link, 0), [
-                        r.set("_sl", floor(div(link, 16))),
-                        B.repeat(mod(link, 16), [B.call("_bvh triangle %s", sl), r.change("_sl", 1)]),
-                    ]),
-                    r.change("_p", 7),
-                ], [
-                    B.if_(lt(link, 0), [r.set("_p", sub(0, link))], [r.change("_p", 7)]),
-                ]),
-            ]),
-        ]
-    else:
-        walk = _bvh_wide_walk(r, s, p)
-    finish = [
-        B.if_(gt(hit, 0), [
-            r.set("hit slot", hit), r.set("hit tri", item(hit, ids)), r.set("hit t", best),
-        ], [
-            r.set("hit slot", 0), r.set("hit tri", 0), r.set("hit t", -1),
-            r.set("hit u", 0), r.set("hit v", 0),
-        ]),
-    ]
-    r.define("bvh ray %s %s %s %s %s %s", ["ox", "oy", "oz", "dx", "dy", "dz"], setup + walk + finish)
-
-
-def _bvh_wide_walk(r: _Reader, s: BVHSpec, p: B.VarRef) -> list[B.Node]:
-    nodes = s.nodes
-    quant = s.layout == "quantised"
-    stride = 7 if quant else 27
-    M = 2 ** s.bits
-    Q = float(M - 2) if M > 2 else 1.0
-    frame, box = r.lst("_bvh frame", [0] * 6), r.lst("_bvh box", [0] * 6)
-    stack = r.lst("_bvh stack")
-    ftn, fptr, fbox = r.lst("_bvh found tn"), r.lst("_bvh found ptr"), r.lst("_bvh found box")
-    m, j, ni, nl, code, w, sl = (r.v(x) for x in ("_m", "_j", "_ni", "_nl", "_code", "_w", "_sl"))
-    bh, best, tn = var("_bh"), var("_best"), var("_tn")
-    cvars = [r.v(f"_c{a}") for a in "xyz"]
-    kk, kbest = r.v("_kk"), r.v("_kbest")
-
-    child: list[B.Node] = [
-        r.set("_code", mod(m, 16)),
-        r.set("_m", floor(div(m, 16))),
-    ]
-    if quant:
-        child.append(r.set("_w", item(add(add(p, 3), j), nodes)))
-        qs = []
-        for k in range(6):
-            child += [r.set(f"_q{k}", mod(w, M)), r.set("_w", floor(div(w, M)))]
-            qs.append(var(f"_q{k}"))
-            r.v(f"_q{k}")
-        for k in range(6):
-            a = k % 3
-            child.append(B.replace_item(box, k + 1, add(item(a + 1, frame), mul(qs[k], cvars[a]))))
-        child.append(B.call("_bvh box"))
-    else:
-        child.append(B.call("_bvh box at %s", add(add(p, 3), mul(6, j))))
-    remember: list[B.Node] = [B.add_to(ftn, tn),
-                              B.add_to(fptr, add(item(add(p, 1), nodes), mul(ni, stride)))]
-    if quant:
-        remember += [B.add_to(fbox, item(k, box)) for k in range(1, 7)]
-    child += [
-        B.if_(eq(code, 15), [
-            B.if_(eq(bh, 1), remember),
-            r.change("_ni", 1),
-        ], [
-            B.if_(eq(bh, 1), [
-                r.set("_sl", add(item(add(p, 2), nodes), nl)),
-                B.repeat(code, [B.call("_bvh triangle %s", sl), r.change("_sl", 1)]),
-            ]),
-            r.change("_nl", code),
-        ]),
-        r.change("_j", 1),
-    ]
-    # push the remembered children farthest first (ties: the later child first), culling by best
-    push_one: list[B.Node] = [
-        r.set("_kbest", 1), r.set("_kk", 2),
-        B.repeat(sub(B.list_length(ftn), 1), [
-            B.if_(not_(lt(item(kk, ftn), item(kbest, ftn))), [r.set("_kbest", kk)]),
-            r.change("_kk", 1),
-        ]),
-        B.if_(_le(item(kbest, ftn), best),
-              ([B.add_to(stack, item(add(mul(6, sub(kbest, 1)), k), fbox)) for k in range(1, 7)] if quant else [])
-              + [B.add_to(stack, item(kbest, fptr)), B.add_to(stack, item(kbest, ftn))]),
-        B.delete_item(ftn, kbest), B.delete_item(fptr, kbest),
-    ]
-    if quant:
-        push_one += [B.delete_item(fbox, add(mul(6, sub(kbest, 1)), 1)) for _ in range(6)]
-    last = B.list_length(stack)
-    pop_frame = ([*(x for k in range(6, 0, -1) for x in (B.replace_item(frame, k, item(last, stack)),
-                                                          B.delete_item(stack, "last")))] if quant else [])
-    pop = [
-        r.set("_p", 0),
-        B.repeat_until(or_(gt(p, 0), eq(B.list_length(stack), 0)), [
-            r.set("_tn", item(last, stack)), B.delete_item(stack, "last"),
-            B.if_(_le(tn, best), [
-                r.set("_p", item(last, stack)), B.delete_item(stack, "last"),
-                *pop_frame,
-            ], [B.delete_item(stack, "last") for _ in range(7 if quant else 1)]),
-        ]),
-    ]
-    per_node: list[B.Node] = [
-        r.set("_m", item(p, nodes)), r.set("_j", 0), r.set("_ni", 0), r.set("_nl", 0),
-    ]
-    if quant:
-        per_node += [r.set(f"_c{a}", div(sub(item(4 + k, frame), item(1 + k, frame)), Q))
-                     for k, a in enumerate("xyz")]
-    per_node += [
-        B.delete_all(ftn), B.delete_all(fptr), B.delete_all(fbox),
-        B.repeat_until(eq(m, 0), child),
-        B.repeat(B.list_length(ftn), push_one),
-        *pop,
-    ]
-    return [
-        B.delete_all(stack),
-        r.set("_p", 0),
-        B.if_(gt(B.list_length(nodes), 0), [
-            *[B.replace_item(frame, k, item(k, nodes)) for k in range(1, 7)],
-            *[B.replace_item(box, k, item(k, frame)) for k in range(1, 7)],
-            B.call("_bvh box"),
-            B.if_(eq(bh, 1), [r.set("_p", 7)]),
-        ]),
-        B.repeat_until(eq(p, 0), per_node),
-    ]
-
-
-# ---- TextImage
-def _textimage_blocks(r: _Reader) -> None:
-    s, pos, c = r.v("_ts", ""), r.v("_tp"), r.v("_tc")
-    out = r.lst("ti colors")
-    hdr = r.lst("_ti header")
-    px, alpha = r.lst("_ti px"), r.lst("_ti a")
-    table = r.lst("_ti hash")
-    vols: list[int] = []
-    for (oy, ou, ov), _dims in VOLUMES:
-        vols += [oy, ou, ov]
-    vol = r.lst("_ti volumes", vols)
-    W, H = r.v("ti width"), r.v("ti height")
-    tok, i, k, rest = r.v("_tok", ""), r.v("_ti i"), r.v("_ti k"), r.v("_rest", "")
-    end, cnt, vf = r.v("_tend"), r.v("_tcount"), r.v("_tvf")
-    op, op2, rn, val = r.v("_top"), r.v("_top2"), r.v("_trn"), r.v("_tval")
-    R, G, Bv = r.v("_tr"), r.v("_tg"), r.v("_tb")
-    dY, dU, dV, idx = r.v("_tdy"), r.v("_tdu"), r.v("_tdv"), r.v("_tidx")
-    d0, d1, d2 = r.v("_td0"), r.v("_td1"), r.v("_td2")
-
-    # one character -> its value 0..93 (case-sensitive: costume names)
-    r.define("_ti char", [], [
-        B.switch_costume(B.letter_of(pos, s)),
-        r.set("_tc", sub(B.costume_number(), 1)),
-        r.change("_tp", 1),
-    ])
-    # the text after the first two characters of a header token ("x:12" -> "12")
-    r.define("_ti rest %s", ["s"], [
-        r.set("_rest", ""), r.set("_ti j", 3),
-        B.repeat(sub(B.length_of(B.arg("s")), 2), [
-            r.set("_rest", B.join(rest, B.letter_of(var("_ti j"), B.arg("s")))), r.change("_ti j", 1)]),
-    ])
-
-    def prev(kexpr, lst: str) -> B.Node:
-        """value emitted kexpr pixels ago (0 before the start) -> _tval"""
-        return B.if_(gt(kexpr, B.list_length(lst)), [r.set("_tval", 0)],
-                     [r.set("_tval", item(add(sub(B.list_length(lst), kexpr), 1), lst))])
-
-    # emit a colour: append, then update the hash table
-    r.define("_ti emit %s", ["c"], [
-        B.add_to(px, B.arg("c")),
-        r.set("_tr", floor(div(B.arg("c"), 65536))),
-        r.set("_tg", mod(floor(div(B.arg("c"), 256)), 256)),
-        r.set("_tb", mod(B.arg("c"), 256)),
-        B.replace_item(table, add(mod(add(add(mul(3, R), mul(5, G)), mul(7, Bv)), 94), 1), B.arg("c")),
-    ])
-    o = B.arg("op")
-    r.define("_ti rgb op %s", ["op"], [
-        B.if_(lt(o, 21), [
-            r.set("_tval", mul(o, 830584)),
-            B.call("_ti char"), r.change("_tval", mul(c, 8836)),
-            B.call("_ti char"), r.change("_tval", mul(c, 94)),
-            B.call("_ti char"), r.change("_tval", c),
-            B.call("_ti emit %s", mod(val, 16777216)),
-        ], [B.if_(and_(gt(o, 21), lt(o, 26)), [
-            B.if_(eq(o, 22), [prev(1, px)], [
-                B.if_(eq(o, 23), [prev(vf, px)], [
-                    B.if_(eq(o, 24), [prev(W, px)], [prev(add(W, 1), px)])])]),
-            B.call("_ti emit %s", val),
-        ], [B.if_(eq(o, 26), [
-            B.call("_ti char"),
-            B.call("_ti emit %s", item(add(c, 1), table)),
-        ], [B.if_(and_(gt(o, 27), lt(o, 91)), [
-            r.set("_tidx", sub(o, 28)),
-            r.set("_tdy", item(add(mul(3, idx), 1), vol)),
-            r.set("_tdu", item(add(mul(3, idx), 2), vol)),
-            r.set("_tdv", item(add(mul(3, idx), 3), vol)),
-            B.if_(lt(idx, 45), [
-                r.set("_td0", 5), r.set("_td1", 4), r.set("_td2", 4),
-                B.call("_ti char"), r.set("_tidx", c),
-            ], [
-                r.set("_td0", 21), r.set("_td1", 20), r.set("_td2", 20),
-                B.call("_ti char"), r.set("_tidx", mul(c, 94)),
-                B.call("_ti char"), r.change("_tidx", c),
-            ]),
-            r.change("_tdy", mod(floor(div(idx, mul(d1, d2))), d0)),
-            r.change("_tdu", mod(floor(div(idx, d2)), d1)),
-            r.change("_tdv", mod(idx, d2)),
-            prev(1, px),
-            r.set("_tr", add(floor(div(val, 65536)), add(dV, dY))),
-            r.set("_tg", add(mod(floor(div(val, 256)), 256), dY)),
-            r.set("_tb", add(mod(val, 256), add(dU, dY))),
-            B.call("_ti emit %s", add(add(mul(R, 65536), mul(G, 256)), Bv)),
-        ], [
-            # unknown opcode: stop this stream
-            r.set("_tp", add(end, 1)),
-        ])])])]),
-    ])
-    r.define("_ti a8 op %s", ["op"], [
-        B.if_(lt(o, 3), [
-            r.set("_tval", mul(o, 94)), B.call("_ti char"), r.change("_tval", c),
-        ], [B.if_(lt(o, 7), [
-            B.if_(eq(o, 3), [prev(1, alpha)], [
-                B.if_(eq(o, 4), [prev(vf, alpha)], [
-                    B.if_(eq(o, 5), [prev(W, alpha)], [prev(add(W, 1), alpha)])])]),
-        ], [
-            prev(1, alpha),
-            B.if_(lt(o, 51), [r.set("_tval", mod(add(val, sub(o, 7)), 256))],
-                  [r.set("_tval", mod(sub(val, sub(o, 50)), 256))]),
-        ])]),
-        B.add_to(alpha, val),
-    ])
-
-    def stream(kind: str, lst: str, rle: int) -> list[B.Node]:
-        opc = f"_ti {kind} op %s"
-        return [
-            B.repeat_until(or_(not_(lt(B.list_length(lst), cnt)), gt(pos, end)), [
-                B.call("_ti char"),
-                B.if_(eq(c, rle), [
-                    B.call("_ti char"), r.set("_top2", c),
-                    B.call("_ti char"), r.set("_trn", c),
-                    B.repeat(rn, [B.call(opc, op2)]),
-                ], [B.call(opc, c)]),
-            ]),
-        ]
-
-    r.define("_ti rgb8 %s %s", ["start", "length"], [
-        B.delete_all(px), B.delete_all(table), B.repeat(94, [B.add_to(table, 0)]),
-        r.set("_tp", B.arg("start")), r.set("_tend", sub(add(B.arg("start"), B.arg("length")), 1)),
-        *stream("rgb", px, 27),
-    ])
-    r.define("_ti a8 %s %s", ["start", "length"], [
-        B.delete_all(alpha),
-        r.set("_tp", B.arg("start")), r.set("_tend", sub(add(B.arg("start"), B.arg("length")), 1)),
-        *stream("a8", alpha, 7),
-    ])
-
-    # header: tokens up to the first "|"
-    mtype, mstart, mlen = r.v("_tmtype", ""), r.v("_tmstart"), r.v("_tmlen")
-    astart, alen, cur = r.v("_tastart"), r.v("_talen"), r.v("_tcur")
-    nl = r.v("_tnl")
-    letter = B.letter_of(i, s)
-    tok1, tok2 = B.letter_of(1, tok), B.letter_of(2, tok)
-    layer = [
-        r.set("_tok", item(add(k, 1), hdr)),  # purpose
-        B.if_(eq(tok, "main"), [
-            r.set("_tmtype", item(add(k, 2), hdr)), r.set("_tmstart", cur),
-            r.set("_tmlen", item(add(k, 4), hdr))]),
-        B.if_(eq(tok, "alpha"), [r.set("_tastart", cur), r.set("_talen", item(add(k, 4), hdr))]),
-        r.change("_tcur", item(add(k, 4), hdr)),
-        r.change("_ti k", 4),
-    ]
-    r.define("decode textimage %s", ["text"], [
-        r.set("_ts", B.arg("text")),
-        B.delete_all(out), B.delete_all(hdr), B.delete_all(px), B.delete_all(alpha),
-        r.set("_tok", ""), r.set("_ti i", 1),
-        B.repeat_until(or_(eq(letter, "|"), gt(i, B.length_of(s))), [
-            B.if_(eq(letter, ","), [B.add_to(hdr, tok), r.set("_tok", "")],
-                  [r.set("_tok", B.join(tok, letter))]),
-            r.change("_ti i", 1),
-        ]),
-        B.add_to(hdr, tok),
-        r.set("_tcur", add(i, 1)),
-        r.set("ti width", 0), r.set("ti height", 0), r.set("_tmtype", ""), r.set("_tastart", 0),
-        r.set("_ti k", 1),
-        B.repeat_until(gt(k, B.list_length(hdr)), [
-            r.set("_tok", item(k, hdr)),
-            B.if_(eq(tok2, ":"), [
-                B.if_(eq(tok1, "x"), [B.call("_ti rest %s", tok), r.set("ti width", rest)]),
-                B.if_(eq(tok1, "y"), [B.call("_ti rest %s", tok), r.set("ti height", rest)]),
-                B.if_(eq(tok1, "p"), [
-                    B.call("_ti rest %s", tok), r.set("_tnl", div(rest, 4)),
-                    B.repeat(nl, layer),
-                ]),
-            ]),
-            r.change("_ti k", 1),
-        ]),
-        r.set("_tcount", mul(W, H)),
-        B.if_(eq(W, 1), [r.set("_tvf", 3)], [r.set("_tvf", sub(W, 1))]),
-        B.if_(eq(mtype, "RGB8"), [B.call("_ti rgb8 %s %s", mstart, mlen)], [
-            B.delete_all(px),
-            B.if_(eq(mtype, "A8"), [
-                B.call("_ti a8 %s %s", mstart, mlen),
-                r.set("_ti i", 1),
-                B.repeat(B.list_length(alpha), [
-                    B.add_to(px, mul(item(i, alpha), 65793)), r.change("_ti i", 1)]),
-            ], [B.repeat(cnt, [B.add_to(px, 0)])]),
-        ]),
-        B.if_(gt(astart, 0), [
-            B.call("_ti a8 %s %s", astart, alen),
-            r.set("_ti i", 1),
-            B.repeat(cnt, [
-                r.set("_tval", item(i, alpha)),
-                B.if_(lt(val, 1), [r.set("_tval", 1)]),
-                B.add_to(out, add(mul(val, 16777216), item(i, px))),
-                r.change("_ti i", 1),
-            ]),
-        ], [
-            r.set("_ti i", 1),
-            B.repeat(cnt, [B.add_to(out, item(i, px)), r.change("_ti i", 1)]),
-        ]),
-        B.switch_costume(ALPHABET[0]),
     ])
 
 
 # --------------------------------------------------------------------------- public API
+def _builtin_parts(spec: ReaderSpec) -> list[Callable[[ReaderBuilder], None]]:
+    parts: list[Callable[[ReaderBuilder], None]] = []
+    if spec.mesh:
+        if spec.helpers:
+            parts.append(_load_triangle)
+        if spec.bsp is not None:
+            parts.append(_bsp_blocks)
+        if spec.renderer:
+            parts += [_camera_blocks, _render_blocks]
+    if spec.bvh:
+        parts.append(bvh_part)
+    if spec.textimage:
+        parts.append(textimage_part)
+    return parts
+
+
 def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[str, list] | None = None,
                   stage_lists: dict[str, str] | Sequence[str] = (), layer_order: int = 1,
                   demo: bool = False) -> sb3.Target:
@@ -907,38 +548,41 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
     ``local_lists``: data lists stored in the sprite itself (name -> items), e.g. for a
     .sprite3. ``stage_lists``: names (or name -> id) of data lists that live on the stage.
     Every list in ``spec.lists_read()`` must be in one of them. ``demo`` adds a green-flag
-    script that renders the model from the default camera."""
+    script: the parts' ``at_flag`` blocks, then it renders the model from the spec's camera."""
     local_lists = dict(local_lists or {})
     stage_ids = dict(stage_lists) if isinstance(stage_lists, dict) else \
         {n: sb3.stable_id("Stage", "list", n) for n in stage_lists}
     missing = [n for n in spec.lists_read() if n not in local_lists and n not in stage_ids]
     if missing:
         raise B.BlockError(f"the reader reads lists that are not in the project: {', '.join(missing)}")
-    r = _Reader(spec, {n: sb3.stable_id(name, "list", n) for n in local_lists}, stage_ids, name)
-    if spec.mesh:
-        _mesh_blocks(r)
-        if spec.renderer:
-            _camera_blocks(r)
-    if spec.bvh:
-        _bvh_blocks(r)
-    if spec.textimage:
-        _textimage_blocks(r)
+    r = ReaderBuilder(spec, {n: sb3.stable_id(name, "list", n, length=VAR_ID_LENGTH) for n in local_lists},
+                      stage_ids, name)
+    for part in _builtin_parts(spec) + list(spec.parts):
+        part(r)
     all_local = dict(local_lists)
     for k, v in r.local_lists.items():
         if k in all_local:
             raise B.BlockError(f"list {k!r} is used by the reader itself")
         all_local[k] = v
-    scope = B.Scope(name, variables=list(r.vars), lists=list(all_local), stage_lists=stage_ids)
+    scope = B.Scope(name, variables={n: sb3.stable_id(name, "var", n, length=VAR_ID_LENGTH) for n in r.vars},
+                    lists={n: sb3.stable_id(name, "list", n, length=VAR_ID_LENGTH) for n in all_local},
+                    stage_lists=stage_ids)
     b = B.Builder(scope)
     for proccode, args, body in r.procs:
         b.define(proccode, args, body)
-    if demo and spec.mesh and spec.renderer:
-        cam = spec.camera
-        b.when_flag([B.call("set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch),
-                     B.call("render")])
-    costumes = []
-    if spec.textimage:
-        asset = sb3.Asset(EMPTY_SVG, "svg")
-        costumes = [sb3.Costume(ch, asset, 1, (1.0, 1.0)) for ch in ALPHABET]
+    if demo:
+        script = list(r.flag)
+        if spec.mesh and spec.renderer:
+            cam = spec.camera
+            draw = [B.set_var("cam x", cam.x), B.set_var("cam y", cam.y), B.set_var("cam z", cam.z),
+                    B.set_var("cam yaw", cam.yaw), B.set_var("cam pitch", cam.pitch), B.call("render")]
+            script += [B.if_(r.flag_guard, draw)] if r.flag_guard is not None else draw
+        if script:
+            b.when_flag(script)
+    # the alphabet first (costume k + 1 is character k: the decoders read costume numbers), the
+    # pen's fence costume after it
+    costumes = alphabet_costumes() if r.alphabet else []
+    if spec.mesh and spec.renderer:
+        costumes.append(sb3.Costume("fence", sb3.Asset(FENCE_SVG, "svg"), 1, (FENCE / 2, FENCE / 2)))
     return sb3.Target(name, lists=all_local, variables=dict(r.vars), costumes=costumes,
-                      blocks=b.build(), layer_order=layer_order, visible=False)
+                      blocks=b.build(), layer_order=layer_order, visible=False, id_length=VAR_ID_LENGTH)

@@ -102,6 +102,7 @@ class Target:
     layer_order: int = 0
     visible: bool = True
     current_costume: int = 0
+    id_length: int = 20  # characters of the variable and list ids (derived from the names)
 
     def to_json(self) -> dict[str, Any]:
         costumes = self.costumes or [Costume("backdrop1" if self.is_stage else "costume1",
@@ -109,8 +110,9 @@ class Target:
                                              1, (240.0, 180.0) if self.is_stage else (1.0, 1.0))]
         t: dict[str, Any] = {
             "isStage": self.is_stage, "name": self.name,
-            "variables": {stable_id(self.name, "var", k): [k, v] for k, v in self.variables.items()},
-            "lists": {stable_id(self.name, "list", k): [k, v] for k, v in self.lists.items()},
+            "variables": {stable_id(self.name, "var", k, length=self.id_length): [k, v]
+                          for k, v in self.variables.items()},
+            "lists": {stable_id(self.name, "list", k, length=self.id_length): [k, v] for k, v in self.lists.items()},
             "broadcasts": {}, "blocks": self.blocks, "comments": {},
             "currentCostume": self.current_costume, "costumes": [c.to_json() for c in costumes], "sounds": [],
             "volume": 100, "layerOrder": self.layer_order,

@@ -232,6 +232,7 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
 
     # 2. encodings
     costumes: list[tuple[str, bytes]] = list(scene.artefacts.get("costumes", []))
+    written_lists: list[str] = []  # for the export's list choice: a texture in the project needs UVs
     details = []
     seen_names: set[str] = set(scene.lists)
     for t in textures:
@@ -262,6 +263,7 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
                                       "the textures.*_name keys or rename the materials", key="textures.list_name")
                 seen_names.add(lst.name)
                 scene = scene.with_list(lst)
+                written_lists.append(lst.name)
             written[e] = "written"
         H, W = t.image.shape[:2]
         details.append({
@@ -273,6 +275,8 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
         })
     if costumes:
         scene = scene.with_artefact("costumes", costumes)
+    scene = scene.with_artefact("texture_outputs", {"lists": written_lists,
+                                                    "costumes": [c[0] for c in costumes]})
     rec.details["textures"] = details
     rec.details["size_table"] = size_table([t.encoded for t in textures])
     rec.counts_out = {"polygons": scene.n_polygons, "triangles": scene.n_triangles, "vertices": scene.n_vertices,

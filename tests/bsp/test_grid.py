@@ -40,19 +40,21 @@ def _geometry(lists):
 
 
 def _coplanar_groups(nodes):
-    """(plane number, first triangle (0-based), nA, nD, nB) of every split record, read item by item."""
+    """(item of the plane's d, first triangle (0-based), nA, nD, nB) of every split record, read item
+    by item (record format 2: ``T, B, fF, nF, fB, nB`` with ``fF = first``, ``nF = nA + nD``,
+    ``fB = first + nA``, ``nB = nD + nBack``)."""
     out, i = [], 0
     while i < len(nodes):
         T = nodes[i]
         if T == 0:
             i += 3
         elif T == 1:
-            i += 4
-        elif T > 0:
-            out.append((T - 1, nodes[i + 2] - 1, nodes[i + 3], 0, nodes[i + 4]))
             i += 5
         else:
-            out.append((-T - 1, nodes[i + 2] - 1, nodes[i + 3], nodes[i + 4], nodes[i + 5]))
+            fF, nF, fB, nB = nodes[i + 2:i + 6]
+            nA = fB - fF
+            nD = nF - nA
+            out.append((T, fF - 1, nA, nD, nB - nD))
             i += 6
     return out
 
@@ -65,8 +67,9 @@ def test_house_written_with_bsp_has_no_collapsed_flipped_or_tilted_triangles(hou
     groups = _coplanar_groups([int(x) for x in lists["bsp nodes"]])
     assert len(groups) > 100
     seen = 0
-    for p, first, nA, nD, nB in groups:
-        n = P[p - 1, :3] / np.linalg.norm(P[p - 1, :3])
+    flat = P.ravel()
+    for t, first, nA, nD, nB in groups:
+        n = flat[t - 4:t - 1] / np.linalg.norm(flat[t - 4:t - 1])
         for start, cnt, sign in ((first, nA, 1), (first + nA, nD, 0), (first + nA + nD, nB, -1)):
             c = cr[start:start + cnt]
             cos = c @ n / np.linalg.norm(c, axis=1)

@@ -21,7 +21,7 @@ def parse_records(nodes: np.ndarray):
     n = len(nodes)
     while r <= n:
         T = int(nodes[r - 1])
-        size = 3 if T == 0 else 4 if T == 1 else 5 if T > 0 else 6
+        size = 3 if T == 0 else 5 if T == 1 else 6
         assert r + size - 1 <= n, "record runs past the end of the list"
         out[r] = (T, [int(x) for x in nodes[r:r + size - 1]])
         r += size
@@ -34,11 +34,11 @@ def ranges(recs) -> list[tuple[int, int]]:
         if T == 0:
             out.append((f[0], f[1]))
         elif T == 1:
-            out.append((f[0], f[1] + f[2]))
-        elif T > 0:
-            out.append((f[1], f[2] + f[3]))
-        else:
-            out.append((f[1], f[2] + f[3] + f[4]))
+            assert f[2] == f[0] + f[1]  # the suffix follows the prefix
+            out.append((f[0], f[1] + f[3]))
+        else:  # fF, nF (nA + nD), fB (first + nA), nB (nD + nBack): the group is fF .. fB + nB - 1
+            assert f[3] >= f[1] and f[3] + f[4] >= f[1] + f[2]
+            out.append((f[1], f[3] + f[4] - f[1]))
     return out
 
 
@@ -114,16 +114,16 @@ def test_lists_cover_every_triangle_exactly_once():
     assert (seen[1:] == 1).all()
     starts = set(recs)
     for r, (T, f) in recs.items():
-        if abs(T) >= 2:
-            assert 1 <= abs(T) - 1 <= len(planes)
-            size = 5 if T > 0 else 6
+        if T >= 2:
+            assert T % 4 == 0 and 1 <= T // 4 <= len(planes)  # the item of the plane's d
+            size = 6
             B = f[0]
             if B != 0:
                 assert abs(B) in starts and abs(B) > r
             if B >= 0:
                 assert r + size in starts  # the front child follows
         elif T == 1:
-            assert r + 4 in starts  # the peeled core follows
+            assert r + 5 in starts  # the peeled core follows
     # planes are unit normals (to the kept decimals) in canonical orientation, all distinct
     assert np.allclose(np.linalg.norm(planes[:, :3], axis=1), 1, atol=1e-5)
     first_nz = planes[np.arange(len(planes)), np.argmax(planes[:, :3] != 0, axis=1)]
@@ -161,8 +161,8 @@ def test_same_result_after_translation_and_scaling(name):
         for r in r0:
             (T0, f0), (T1, f1) = r0[r], r1[r]
             assert f0 == f1 and (T0 > 1) == (T1 > 1) and (T0 < -1) == (T1 < -1) and (T0 in (0, 1)) == (T1 in (0, 1))
-            if abs(T0) >= 2:
-                a, b = p0[abs(T0) - 2], p1[abs(T1) - 2]
+            if T0 >= 2:
+                a, b = p0[T0 // 4 - 1], p1[T1 // 4 - 1]
                 np.testing.assert_array_equal(a[:3], b[:3])  # same rounded normal
                 # offset moved with the scene: d' = scale * d + n . shift
                 assert abs(b[3] - (scale * a[3] + a[:3].sum() * shift)) <= 1e-7 * base.scale() * scale + 1e-10 * abs(shift)

@@ -99,8 +99,12 @@ def test_odd_obj_directives_bake_with_a_named_warning(tmp_path, capsys, name, te
     assert code == 0 and err == "", err
     if warning:
         assert any(re.search(warning, w) for w in warnings_of(out)), warnings_of(out)
-    # the one good face is baked whatever the odd line was
-    assert (out / "lists" / "tris.txt").read_text().split("\n") == ["1", "3", "2", "1"]  # left frame: reversed
+    # the one good face is baked whatever the odd line was, its corners reversed (left frame):
+    # (0,0,0), (0,1,0), (1,0,0); vertices are numbered in first-use order, so they are 1, 2, 3
+    tris = [int(x) for x in (out / "lists" / "tris.txt").read_text().split("\n")]
+    verts = [float(x) for x in (out / "lists" / "verts.txt").read_text().split("\n")]
+    assert tris == [1, 2, 3, 1]
+    assert [tuple(verts[3 * (t - 1): 3 * t]) for t in tris[:3]] == [(0, 0, 0), (0, 1, 0), (1, 0, 0)]
 
 
 def test_lenient_import_drops_bad_faces_and_names_their_lines(tmp_path, capsys):

@@ -48,7 +48,9 @@ def grid(n: int, phase: float = 0.0):
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    """The outputs (not the caches in .bake-cache/: tests/test_cache.py and textures/test_stage.py)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and ".bake-cache" not in p.relative_to(folder).parts}
 
 
 def stat_snapshot(folder: Path) -> dict[str, tuple]:
@@ -83,6 +85,10 @@ def comparable(files: dict[str, bytes]) -> dict[str, object]:
 
 
 def bake_cmd(model: Path, out: Path, *extra: str) -> list[str]:
+    return _bake_cmd(model, out, *extra)
+
+
+def _bake_cmd(model: Path, out: Path, *extra: str) -> list[str]:
     return [sys.executable, "-m", "bake.cli", "run", str(model), "--out", str(out), "--quiet",
             "--set", "bvh.enabled=true", *extra]
 
@@ -90,6 +96,11 @@ def bake_cmd(model: Path, out: Path, *extra: str) -> list[str]:
 # =========================================================================== SIGKILL
 @pytest.mark.slow
 def test_sigkill_at_random_moments_never_loses_or_truncates_outputs(tmp_path):
+    # (without the stage cache, whose report says which stages it served: a rerun would report
+    # differently; tests/test_cache.py kills bakes and re-bakes from what they cached)
+    def bake_cmd(model, out):
+        return _bake_cmd(model, out, "--set", 'cache.dir="none"')
+
     rng = random.Random(20261122)
     model = tmp_path / "model" / "m.obj"
     pos, quads = grid(45)
@@ -167,7 +178,7 @@ def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path,
     assert run_cli(["run", cfg, "--out", a, "--quiet", "--set", "lighting.threads=2"], capsys)[0] == 0
     assert run_cli(["run", cfg, "--out", b, "--quiet", "--set", "lighting.threads=1"], capsys)[0] == 0
     sa, sb = snapshot(a), snapshot(b)
-    assert sa.keys() == sb.keys() and {"m.sb3", "m.sprite3", "lists.json", "lists/vert_colors.txt",
+    assert sa.keys() == sb.keys() and {"m.sb3", "m.sprite3", "lists.json", "lists/tri_colors.txt",
                                        "lists/bvh_nodes.txt"} <= set(sa)
     for k in sa:
         if k not in ("report.json", "report.md", "report.html"):
@@ -181,7 +192,8 @@ def test_reruns_are_byte_identical_and_unchanged_files_keep_their_time(tmp_path,
         next(st for st in r["stages"] if st["name"] == "lighting")["details"].pop("threads")
     assert ra == rb
     # baking again into the same folder rewrites nothing but the reports
-    before = {p: p.stat().st_mtime_ns for p in a.rglob("*") if p.is_file()}
+    before = {p: p.stat().st_mtime_ns for p in a.rglob("*")  # (a cache hit touches its entry: LRU)
+              if p.is_file() and ".bake-cache" not in p.relative_to(a).parts}
     time.sleep(0.02)
     assert run_cli(["run", cfg, "--out", a, "--quiet", "--set", "lighting.threads=2"], capsys)[0] == 0
     rep = json.loads((a / "report.json").read_text())

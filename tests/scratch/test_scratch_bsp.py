@@ -1,23 +1,24 @@
-"""The reader's ``bsp walk`` in the real Scratch VM gives exactly the draw order of the Python
-reference traversal (``bake.bsp.traverse.draw_order``, which reads the exported lists as the
+"""The reader's ``bsp walk`` in the real Scratch VM gives exactly the draw ranges of the Python
+reference traversal (``bake.bsp.traverse.draw_ranges``, which reads the exported lists as the
 Scratch script does), for several eyes: outside the model, inside it, far away. Models: a Cornell
-box, a glTF with two-sided materials (so culling must spare them), Suzanne, and a generated soup
-of intersecting triangles (the tree must split them). The pen renderer, drawing in the walk's
-order from two cameras, shows the painter's picture of that order."""
+box, a glTF with two-sided materials, Suzanne, and a generated soup of intersecting triangles (the
+tree must split them). The pen renderer, drawing in the walk's order from cameras outside
+(safe frames: the fast path) and inside the model (unsafe frames: corners behind the camera are
+tested one by one), shows the painter's picture of that order, culled as ``readers.drawn`` says."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from bake.bsp.traverse import draw_order
+from bake.bsp.traverse import draw_order, draw_ranges, facing_flags
 from bake.scratch import sb3
 from bake.scratch import readers
 from bake.scratch.project import reader_spec
 from bake.scratch.colors import decode_numbers
 from conftest import corpus_path
 from scratch_models import bake, cameras, check_render, project_lists, soup_obj
-from vm_harness import call, vm  # noqa: F401
+from vm_harness import call, camera_vars, eye_vars, vm  # noqa: F401
 
 MODELS = ["cornell", "alphablend", "suzanne", "soup"]
 EYES = ([0, 0, -1.5], [1.1, 0.6, 0.3], [0.05, 0.02, 0.01], [-0.7, -1.2, 0.9], [0.3, 2.5, -0.2], [0, 0, 40])
@@ -53,7 +54,7 @@ def walks(tmp_path_factory, vm):
         spec = reader_spec(res.scene, res.config.export, lists)
         assert spec.bsp is not None
         eyes = _eyes(lists["verts"])
-        jobs.append({"load": str(p), "runs": [call("Mesh", "bsp walk %s %s %s", *e, lists=["draw order"])
+        jobs.append({"load": str(p), "runs": [call("Mesh", "bsp walk", lists=["draw ranges"], set=eye_vars(e))
                                               for e in eyes]})
         cases.append({"name": name, "lists": lists, "spec": spec, "eyes": eyes, "result": res})
     # the renderer in BSP order: Suzanne, a random colour per triangle
@@ -61,20 +62,28 @@ def walks(tmp_path_factory, vm):
     lists = dict(suz["lists"])
     n = len(lists["tris"]) // 4
     lists["tri colors"] = [int(c) for c in np.random.default_rng(3).choice(np.arange(1 << 24), n, replace=False)]
-    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors="tri colors"), bsp=suz["spec"].bsp, textimage=False)
+    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors="tri colors"), bsp=suz["spec"].bsp, textimage=False,
+                              bounds=readers.bounding_sphere(lists["verts"]))
     data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists),
                              readers.reader_target(spec, "Mesh", stage_lists=list(lists))])
     p = tmp / "render.sb3"
     p.write_bytes(data)
-    cams = cameras(lists["verts"])
+    cams = cameras(lists["verts"]) + [inside_camera(lists["verts"])]
     for cam in cams:
         jobs.append({"load": str(p), "runs": [
-            call("Mesh", "set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch),
-            call("Mesh", "render", lists=["draw order"], pen=True)]})
+            call("Mesh", "render", lists=["draw ranges"], variables=["_safe"], pen=True, set=camera_vars(cam))]})
     out = vm({"jobs": jobs}, timeout=600)["jobs"]
     for case, res in zip(cases, out):
         case["vm"] = res
     return cases, {"lists": lists, "cams": cams, "vm": out[len(cases):]}
+
+
+def inside_camera(verts):
+    """A camera in the middle of the model, looking along +x: vertices behind it, an unsafe frame."""
+    v = np.asarray(verts, np.float64).reshape(-1, 3)
+    c, diag = (v.min(0) + v.max(0)) / 2, float(np.linalg.norm(v.max(0) - v.min(0)))
+    return readers.Camera(x=float(c[0]), y=float(c[1] + 0.05 * diag), z=float(c[2] - 0.1 * diag), yaw=60.0,
+                          pitch=-10.0, near=float(f"{diag * 1e-3:.4g}"))
 
 
 @pytest.mark.parametrize("name", MODELS)
@@ -82,18 +91,18 @@ def test_bsp_walk_matches_the_python_traversal(walks, name):
     case = next(c for c in walks[0] if c["name"] == name)
     L = case["lists"]
     assert case["vm"]["validation"][0]["ok"]
-    two = [bool(x) for x in case["spec"].bsp.two_sided]
     n_tris = len(L["tris"]) // 4
-    lengths = set()
     for eye, run in zip(case["eyes"], case["vm"]["runs"]):
-        want = draw_order(L["bsp nodes"], L["bsp planes"], eye, L["tris"], L["verts"], two)
-        got = [int(x) for x in run["lists"]["draw order"]]
-        assert got == want, f"eye {eye}"
-        assert len(set(got)) == len(got) and all(1 <= t <= n_tris for t in got)
-        lengths.add(len(got))
-    assert len(lengths) > 1 or name == "alphablend"  # culling depends on the eye
-    if name == "alphablend":
-        assert any(two) and not all(two)  # both kinds of material are exercised
+        want = draw_ranges(L["bsp nodes"], L["bsp planes"], eye)
+        got = [int(x) for x in run["lists"]["draw ranges"]]
+        assert got == [x for r in want for x in r], f"eye {eye}"
+        order = [t for f, n in want for t in range(f, f + n)]
+        assert len(set(order)) == len(order) and all(1 <= t <= n_tris for t in order)
+        assert order == draw_order(L["bsp nodes"], L["bsp planes"], eye, cull=False)
+        # the walk culls nothing but the coplanar faces turned away from the eye
+        missing = np.setdiff1d(np.arange(1, n_tris + 1), order)
+        facing = facing_flags(L["tris"], L["verts"], eye, [bool(x) for x in case["spec"].two_sided])
+        assert not facing[missing - 1].any()
 
 
 def test_renderer_in_bsp_order_draws_the_painters_picture(walks):
@@ -102,12 +111,21 @@ def test_renderer_in_bsp_order_draws_the_painters_picture(walks):
     verts = np.asarray(lists["verts"], np.float64)
     tris = np.asarray(lists["tris"], np.int64).reshape(-1, 4)
     colours = decode_numbers(lists["tri colors"])[:, :3].astype(int)
+    bounds = readers.bounding_sphere(lists["verts"])
+    safes = []
     for cam, res in zip(render["cams"], render["vm"]):
-        run = res["runs"][1]
-        order = [int(x) for x in run["lists"]["draw order"]]
-        assert order == draw_order(lists["bsp nodes"], lists["bsp planes"], [cam.x, cam.y, cam.z],
-                                   lists["tris"], lists["verts"], [False])
+        run = res["runs"][0]
+        ranges = [int(x) for x in run["lists"]["draw ranges"]]
+        want = draw_ranges(lists["bsp nodes"], lists["bsp planes"], [cam.x, cam.y, cam.z])
+        assert ranges == [x for r in want for x in r]
+        safe = int(float(run["variables"]["_safe"]))
+        assert safe == readers.safe_frame(cam, bounds)
+        safes.append(safe)
+        order = [t for f, n in want for t in range(f, f + n)]
+        shown = readers.drawn(verts, lists["tris"], cam)
+        order = [t for t in order if shown[t - 1]]
         px, py, pz = readers.project(verts, cam)
         # (a few thousand samples at least: split triangles are small, and samples near a later
         # triangle's edge are left out as ambiguous)
         check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, False, min_sure=1500)
+    assert safes[0] == 1 and safes[-1] == 0  # both paths ran

@@ -16,8 +16,8 @@ import zipfile
 import pytest
 
 from bake import cli
-from bake.bsp.traverse import draw_order
-from bake.scratch import sb3
+from bake.bsp.traverse import draw_ranges
+from bake.scratch import readers, sb3
 from bake.scratch import blocks as B
 from conftest import corpus_path
 from vm_harness import call, vm  # noqa: F401
@@ -90,7 +90,8 @@ def test_demo_writes_a_project_that_draws_the_sample(tmp_path, vm):
     out = tmp_path / "bake-demo"
     assert cli.main(["demo", "--out", str(out), "--quiet"]) == 0
     demo = out / "demo.sb3"
-    res = vm({"load": str(demo), "runs": [{"greenFlag": True, "pen": True, "read": {"lists": ["draw order"]}}]})
+    res = vm({"load": str(demo), "runs": [{"greenFlag": True, "pen": True,
+                                             "read": {"lists": ["draw ranges"], "variables": ["_safe"]}}]})
     assert res["validation"][0]["ok"]
     run = res["runs"][0]
     assert run["done"]
@@ -100,10 +101,13 @@ def test_demo_writes_a_project_that_draws_the_sample(tmp_path, vm):
     cam = {name: value for name, value in sprite["variables"].values()}
     # the sample is baked with a BSP tree: the order is the BSP walk from the green flag's camera
     eye = [cam["cam x"], cam["cam y"], cam["cam z"]]
-    want = draw_order(lists["bsp nodes"], lists["bsp planes"], eye, lists["tris"], lists["verts"],
-                      [bool(x) for x in lists["mat two-sided"]])
-    assert [int(x) for x in run["lists"]["draw order"]] == want
-    assert 0 < len(want) < len(lists["tris"]) // 4  # back faces culled
+    want = draw_ranges(lists["bsp nodes"], lists["bsp planes"], eye)
+    assert [int(x) for x in run["lists"]["draw ranges"]] == [x for r in want for x in r]
+    rcam = readers.Camera(cam["cam x"], cam["cam y"], cam["cam z"], cam["cam yaw"], cam["cam pitch"], cam["focal"],
+                          cam["near"])
+    shown = readers.drawn(lists["verts"], lists["tris"], rcam)
+    assert 0 < shown.sum() < len(lists["tris"]) // 4  # back faces culled
+    assert int(float(run["variables"]["_safe"])) == 1  # the green flag's camera frames the model: a safe frame
     strokes = run["pen"]
     xs = [s[0] for s in strokes] + [s[2] for s in strokes]
     ys = [s[1] for s in strokes] + [s[3] for s in strokes]

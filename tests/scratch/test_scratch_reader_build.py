@@ -24,19 +24,22 @@ def _procs(target):
 
 @pytest.mark.parametrize("layout", ["binary", "wide4", "quantised"])
 def test_reader_is_complete_valid_and_deterministic(layout):
-    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI), layout=layout, bits=4))
+    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), textimage=True, helpers=True,
+                              bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI), layout=layout, bits=4),
+                              bounds=readers.bounding_sphere(DATA["verts"]))
     a = readers.reader_target(spec, "Reader", stage_lists=list(DATA), demo=True)
     b = readers.reader_target(spec, "Reader", stage_lists=list(DATA), demo=True)
     assert json.dumps(a.to_json()) == json.dumps(b.to_json())
-    assert _procs(a) >= {"load triangle %s", "set camera %s %s %s %s %s", "project vertices", "draw triangle %s",
-                         "render", "bvh ray %s %s %s %s %s %s", "decode textimage %s"}
+    assert _procs(a) >= {"load triangle %s", "project vertices", "render", "bvh ray %s %s %s %s %s %s",
+                         "decode textimage %s"}
     data, pj = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=DATA), a])
     project, assets = sb3.load_project(data)
     assert sb3.validate_project(project, assets, project_json_bytes=pj) == []
     sprite = project["targets"][1]
-    # one costume per TextImage character, in alphabet order, sharing one asset
-    assert [c["name"] for c in sprite["costumes"]] == list(ALPHABET)
-    assert len({c["md5ext"] for c in sprite["costumes"]}) == 1 and len(assets) == 2
+    # one costume per TextImage character, in alphabet order (costume k + 1 is character k, which
+    # the decoders rely on), sharing one asset, then the pen's fence costume
+    assert [c["name"] for c in sprite["costumes"]] == list(ALPHABET) + ["fence"]
+    assert len({c["md5ext"] for c in sprite["costumes"][:-1]}) == 1 and len(assets) == 3
     # the reader's own names never take a data list's name
     own = {v[0] for v in sprite["lists"].values()} | {v[0] for v in sprite["variables"].values()}
     assert not own & set(DATA)
@@ -49,13 +52,27 @@ def test_reader_is_complete_valid_and_deterministic(layout):
 
 
 def test_reader_parts_follow_the_spec():
-    only_ti = readers.reader_target(readers.ReaderSpec(mesh=None, bvh=None), "R")
+    only_ti = readers.reader_target(readers.ReaderSpec(mesh=None, bvh=None, textimage=True), "R")
     procs = _procs(only_ti)
     assert "decode textimage %s" in procs and all(p.startswith("_ti ") for p in procs - {"decode textimage %s"})
-    no_ti = readers.reader_target(readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), textimage=False),
-                                  "R", local_lists=DATA)
-    assert "decode textimage %s" not in _procs(no_ti) and no_ti.costumes == []
+    no_ti = readers.reader_target(readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None)), "R", local_lists=DATA)
+    assert "decode textimage %s" not in _procs(no_ti) and [c.name for c in no_ti.costumes] == ["fence"]
     assert {"bvh nodes", "verts"} <= set(no_ti.lists)  # local data lists (the .sprite3 case)
+    assert not any(p.startswith(("bvh", "_bvh", "bsp", "load triangle")) for p in _procs(no_ti))
+    # one BVH layout: the quantised reader has no binary walk's per-node box test
+    quant = readers.reader_target(readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI))), "R",
+                                  local_lists=DATA)
+    binary = readers.reader_target(readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI),
+                                                                                     layout="binary")), "R",
+                                   local_lists=DATA)
+    assert "_bvh box at %s" in _procs(binary) and len(binary.blocks) < len(quant.blocks)
+    # parts added by other modules are generated after the built-in ones, and run at the green flag
+    def part(r):
+        r.define("hello", [], [r.set("greeting", 1)])
+        r.at_flag([B.call("hello")])
+    extra = readers.reader_target(readers.ReaderSpec(mesh=readers.MeshNames(tri_colors=None), parts=[part]), "R",
+                                  local_lists=DATA, demo=True)
+    assert "hello" in _procs(extra) and "greeting" in extra.variables
 
 
 def test_reader_refuses_lists_that_are_not_there():

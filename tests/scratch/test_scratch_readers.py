@@ -4,7 +4,7 @@ Corpus models and a generated triangle soup are baked through the real pipeline 
 layout); the .sb3 and .sprite3 the export stage writes are validated by scratch-parser, loaded into
 scratch-vm, and the reader's custom blocks are run headless. They must give:
 
-* ``load triangle``: exactly the corners and colour in the lists;
+* ``load triangle`` (in the .sprite3): exactly the corners and colour in the lists;
 * ``bvh ray``: bit for bit the hit (triangle, t, u, v) of ``bake.bvh.traverse.trace_one`` run on the
   lists as written, for rays that hit, graze, miss, run along axes and start inside;
 * ``project vertices``: bit for bit ``readers.project`` (Scratch's degree trig, 10-decimal rounding);
@@ -26,7 +26,7 @@ from bake.scratch.project import reader_spec
 from bake.scratch.colors import decode_numbers
 from conftest import corpus_path
 from scratch_models import bake, cameras, check_render, encoded_from_lists, project_lists, rays, soup_obj
-from vm_harness import call, vm  # noqa: F401
+from vm_harness import call, camera_vars, vm  # noqa: F401
 
 BAKES = [  # (model, layout, quant bits)
     ("cube", "binary", 6), ("cube", "quantised", 6),
@@ -65,13 +65,14 @@ def baked(tmp_path_factory, vm):
         rs = rays(lists["verts"], lists["tris"], RAYS_PER_BAKE, seed=k)
         n_tris = len(lists["tris"]) // 4
         ts = [1, n_tris, 1 + (7 * k) % n_tris][:LOAD_T]
-        runs = [call("Mesh", "load triangle %s", t, variables=["x1", "y1", "z1", "x2", "y2", "z2", "x3", "y3",
-                                                                 "z3", "tri color"]) for t in ts]
-        runs += [call("Mesh", "bvh ray %s %s %s %s %s %s", *o, *d,
-                      variables=["hit tri", "hit t", "hit u", "hit v", "hit slot"]) for o, d in rs]
-        jobs.append({"load": str(sb3_path), "runs": runs})
-        # the .sprite3 on its own (added to an empty project, as "Upload Sprite" does)
-        jobs.append({"load": str(sprite_path), "runs": runs[:1] + runs[LOAD_T:LOAD_T + 4]})
+        loads = [call("Mesh", "load triangle %s", t, variables=["x1", "y1", "z1", "x2", "y2", "z2", "x3", "y3",
+                                                                  "z3", "tri color"]) for t in ts]
+        ray_runs = [call("Mesh", "bvh ray %s %s %s %s %s %s", *o, *d,
+                         variables=["hit tri", "hit t", "hit u", "hit v", "hit slot"]) for o, d in rs]
+        jobs.append({"load": str(sb3_path), "runs": ray_runs})
+        # the .sprite3 on its own (added to an empty project, as "Upload Sprite" does), with the
+        # authors' helper block
+        jobs.append({"load": str(sprite_path), "runs": loads + ray_runs[:4]})
         cases.append({"bake": (model, layout, bits), "lists": lists, "enc": enc, "rays": rs, "ts": ts,
                       "sb3": sb3_path, "sprite3": sprite_path, "spec": spec, "result": res})
     render_case = _render_jobs(tmp, cases[4], jobs)
@@ -102,7 +103,7 @@ def test_load_triangle_reads_the_lists(baked, k):
     verts = np.asarray(case["lists"]["verts"], np.float64).reshape(-1, 3)
     tris = np.asarray(case["lists"]["tris"]).reshape(-1, 4)
     colours = case["lists"].get("tri colors") or case["lists"]["mat colors"]
-    for t, run in zip(case["ts"], case["vm"]["runs"][:LOAD_T]):
+    for t, run in zip(case["ts"], case["vm_sprite"]["runs"][:LOAD_T]):
         v = run["variables"]
         corners = verts[tris[t - 1, :3] - 1]
         for c in range(3):
@@ -128,9 +129,9 @@ def _check_rays(case, runs, rays_):
 @pytest.mark.parametrize("k", range(len(BAKES)), ids=["-".join(map(str, b)) for b in BAKES])
 def test_bvh_query_matches_the_python_traversal_bit_for_bit(baked, k):
     case = baked[0][k]
-    hits = _check_rays(case, case["vm"]["runs"][LOAD_T:], case["rays"])
+    hits = _check_rays(case, case["vm"]["runs"], case["rays"])
     assert hits >= RAYS_PER_BAKE // 4  # the aimed rays hit: the comparison is not all misses
-    assert _check_rays(case, case["vm_sprite"]["runs"][1:], case["rays"][:4]) >= 0
+    assert _check_rays(case, case["vm_sprite"]["runs"][LOAD_T:], case["rays"][:4]) >= 0
 
 
 # (x, y): hit? for the ray (x, y, -1) + t (0, 0, 1) at the triangle (0,0,0) (1,0,0) (0,1,0), where
@@ -170,26 +171,23 @@ def test_bvh_triangle_test_tolerance_in_the_vm(vm, tmp_path):  # noqa: F811
 
 # --------------------------------------------------------------------------- renderer
 def _render_jobs(tmp, case, jobs):
-    """Suzanne with a random colour per triangle (so a pixel's colour names its triangle), with and
-    without back-face culling, rendered from two cameras."""
+    """Suzanne with a random colour per triangle (so a pixel's colour names its triangle), rendered
+    in list order (no BSP tree) from two cameras."""
     lists = dict(case["lists"])
     n = len(lists["tris"]) // 4
     rng = np.random.default_rng(7)
     lists["tri colors"] = [int(c) for c in rng.choice(np.arange(1 << 24), n, replace=False)]
     out = {"lists": lists, "files": []}
-    for cull in (False, True):
-        spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors="tri colors"), bvh=None, textimage=False,
-                                  cull_backfaces=cull)
-        sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
-        data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
-        p = tmp / f"render-{int(cull)}.sb3"
-        p.write_bytes(data)
-        for cam in cameras(lists["verts"]):
-            jobs.append({"load": str(p), "runs": [
-                call("Mesh", "set camera %s %s %s %s %s", cam.x, cam.y, cam.z, cam.yaw, cam.pitch),
-                {**call("Mesh", "render", lists=["draw order", "_px", "_py", "_pz"], pen=True)},
-            ]})
-            out["files"].append((cull, cam))
+    spec = readers.ReaderSpec(mesh=readers.MeshNames(tri_colors="tri colors"), bvh=None, textimage=False,
+                              bounds=readers.bounding_sphere(lists["verts"]))
+    sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
+    data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
+    p = tmp / "render.sb3"
+    p.write_bytes(data)
+    for cam in cameras(lists["verts"]):
+        jobs.append({"load": str(p), "runs": [
+            call("Mesh", "render", lists=["_px", "_py", "_pz"], pen=True, set=camera_vars(cam))]})
+        out["files"].append(cam)
     return out
 
 
@@ -199,31 +197,31 @@ def test_renderer_draws_the_painters_picture(baked):
     verts = np.asarray(lists["verts"], np.float64)
     tris = np.asarray(lists["tris"], np.int64).reshape(-1, 4)
     colours = decode_numbers(lists["tri colors"])[:, :3].astype(int)
-    for (cull, cam), res in zip(render["files"], render["vm"]):
-        run = res["runs"][1]
+    for cam, res in zip(render["files"], render["vm"]):
+        run = res["runs"][0]
         assert run["done"]
-        n = len(tris)
-        order = [int(x) for x in run["lists"]["draw order"]]
-        assert order == list(range(1, n + 1))  # no BSP: list order
         px, py, pz = readers.project(verts, cam)
         # projection: bit for bit, including Scratch's rounded degree trig
         assert run["lists"]["_px"] == px.tolist() and run["lists"]["_py"] == py.tolist()
         assert run["lists"]["_pz"] == pz.tolist()
-        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, cull)
-        if cull:
-            assert len(run["pen"]) < len(render["vm"][0]["runs"][1]["pen"])  # culling drew less
+        shown = readers.drawn(verts, lists["tris"], cam)
+        assert 0 < shown.sum() < len(tris)  # back faces culled on the stage
+        order = [t for t in range(1, len(tris) + 1) if shown[t - 1]]  # no BSP: list order
+        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, False)
 
 
 def test_demo_script_and_reader_without_bvh(baked):
-    """The fresh .sb3's green flag renders from the camera the bake chose."""
+    """The fresh .sb3's green flag renders from the camera the bake chose; the reader holds only
+    what the bake wrote (no TextImage decoder, no alphabet costumes, one BVH layout)."""
     case = baked[0][2]
     with open(case["sb3"], "rb") as f:
         project, _ = sb3.load_project(f.read())
     sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
-    assert sprite["visible"] is False and len(sprite["costumes"]) == 94
+    assert sprite["visible"] is False and [c["name"] for c in sprite["costumes"]] == ["fence"]
     flags = [b for b in sprite["blocks"].values() if isinstance(b, dict) and b["opcode"] == "event_whenflagclicked"]
     assert len(flags) == 1
     names = {b["mutation"]["proccode"] for b in sprite["blocks"].values()
              if isinstance(b, dict) and b["opcode"] == "procedures_prototype"}
-    assert {"load triangle %s", "render", "bvh ray %s %s %s %s %s %s", "decode textimage %s"} <= names
+    assert {"render", "project vertices", "bvh ray %s %s %s %s %s %s"} <= names
+    assert not names & {"decode textimage %s", "load triangle %s"}
     assert json.dumps(project["extensions"]) == '["pen"]'

@@ -70,10 +70,24 @@ def run_plan(plan: dict[str, Any], timeout: float = 300) -> dict[str, Any]:
 
 
 def call(target: str, proccode: str, *args: Any, lists: list[str] | None = None,
-         variables: list[str] | None = None, pen: bool = False) -> dict[str, Any]:
-    """One run of a plan: call a custom block, then read the given lists/variables."""
-    return {"call": {"target": target, "proccode": proccode, "args": [_arg(a) for a in args]},
-            "read": {"lists": lists or [], "variables": variables or []}, "pen": pen}
+         variables: list[str] | None = None, pen: bool = False, set: dict[str, Any] | None = None) -> dict[str, Any]:
+    """One run of a plan: set variables of the target (``set``), call a custom block, then read
+    the given lists/variables."""
+    run = {"call": {"target": target, "proccode": proccode, "args": [_arg(a) for a in args]},
+           "read": {"lists": lists or [], "variables": variables or []}, "pen": pen}
+    if set:
+        run["set"] = {"target": target, "variables": {k: _arg(v) for k, v in set.items()}}
+    return run
+
+
+def camera_vars(cam) -> dict[str, Any]:
+    """The reader's camera variables for a ``bake.scratch.readers.Camera``."""
+    return {"cam x": cam.x, "cam y": cam.y, "cam z": cam.z, "cam yaw": cam.yaw, "cam pitch": cam.pitch,
+            "focal": cam.focal, "near": cam.near}
+
+
+def eye_vars(eye) -> dict[str, Any]:
+    return {"cam x": float(eye[0]), "cam y": float(eye[1]), "cam z": float(eye[2])}
 
 
 def _arg(a: Any) -> str:

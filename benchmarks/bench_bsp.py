@@ -337,11 +337,15 @@ def finish(out: dict) -> dict:
                     "goal": v, "goal_text": f"at most {v:+.0%}", "after": after[k]["inflation"],
                     "met": "yes" if after[k]["inflation"] <= v else "no"}
     out["goals"] = g
-    for k, v in (out.get("walks") or {}).items():
+    walk_ratios(out)
+    return out
+
+
+def walk_ratios(out: dict) -> None:
+    for v in (out.get("walks") or {}).values():
         if isinstance(v, dict) and v.get("before"):
             v["ratio"] = round(v["after"]["blocks"] / v["before"]["blocks"], 3)
             v["estimate_error"] = round(v["after"]["estimate"] / v["after"]["blocks"] - 1, 4)
-    return out
 
 
 # ---------------------------------------------------------------------------- main
@@ -351,7 +355,12 @@ def main() -> None:
     ap.add_argument("--no-before", action="store_true", help="skip the base commit's builder")
     ap.add_argument("--cpu", metavar="MODELS", help="only: CPU seconds of both builders, one BLAS thread, "
                     "alternating 3 times per model (e.g. bunny,bunny_20k); added to the JSON as 'cpu'")
+    ap.add_argument("--walks", action="store_true", help="only: the scratch-vm walks of both builders, each "
+                    "with its own commit's reader; replaces 'walks' in the JSON")
     args = ap.parse_args()
+    if args.walks:
+        walks_only()
+        return
     if args.cpu:
         cpu_only(args.cpu.split(","))
         return
@@ -380,10 +389,25 @@ def main() -> None:
         out["ablations"] = ablations([k for k in ("suzanne", "teapot", "spot", "duck", "house") if k in names])
         out["search"] = search_sweep([k for k in ("suzanne", "house", "duck", "teapot") if k in names])
         out["proof"] = proofs(names)
-        walk_models = {"suzanne": ("suzanne_obj", "suzanne.obj"), "teapot": ("teapot_obj", "teapot.obj"),
-                       "duck": ("duck_glb", "Duck.glb"), "house": ("house_max2obj_walls", "regr01.obj")}
-        out["walks"] = run_walks(old, walk_models, Path(tmp))
+        out["walks"] = run_walks(old, WALK_MODELS, Path(tmp))
     _write(out)
+
+
+WALK_MODELS = {"suzanne": ("suzanne_obj", "suzanne.obj"), "teapot": ("teapot_obj", "teapot.obj"),
+               "duck": ("duck_glb", "Duck.glb"), "house": ("house_max2obj_walls", "regr01.obj")}
+
+
+def walks_only() -> None:
+    """Re-measure the walks alone (block counts do not depend on the machine's load) and keep the
+    rest of the JSON."""
+    out = json.loads(OUT.read_text()) if OUT.exists() else {"machine": {}}
+    with tempfile.TemporaryDirectory(prefix="bench-bsp-") as tmp:
+        old = base_checkout(Path(tmp) / "base")
+        out["walks"] = run_walks(old, WALK_MODELS, Path(tmp))
+    out["walks_command"] = " ".join(sys.argv)
+    walk_ratios(out)
+    OUT.write_text(json.dumps(out, indent=1))
+    print(f"wrote {OUT}")
 
 
 def cpu_only(names) -> None:

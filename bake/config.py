@@ -123,8 +123,20 @@ class BSPConfig:
     # "pieces": 1 per fragment cut (qbsp/ZDBSP count; use split_weight 8 for their balance)
     split_cost: Literal["triangles", "pieces"] = "triangles"
     split_weight: float = 4.0
-    balance_weight: float = 1.0
+    balance_weight: float = 0.5
     coplanar_weight: float = 0.0
+    # planes through an edge of one face and a corner of another, per node (0 = face planes only);
+    # used only where their cuts add at most edge_plane_cost triangles per face of the node
+    edge_planes: int = 64
+    edge_plane_cost: float = 0.3
+    # nodes of more faces score every candidate on a sample of this many (0 = all of them) and
+    # rescore the best score_refine on all
+    score_sample: int = 512
+    score_refine: int = 4
+    # nodes of at most ensemble_max faces are built `ensemble` times from their best planes and the
+    # subtree adding the fewest triangles is kept (1 = off)
+    ensemble: int = 1
+    ensemble_max: int = 128
     seed: int = 0
     # Leaves: "priority" (sets drawn in a fixed order valid from every viewpoint, plus peeling),
     # "convex" (only sets in which no face can hide another), "none" (classic BSP).
@@ -337,7 +349,8 @@ class ExportConfig:
     # Ngons lists); polygons that cannot be kept whole are written as triangles.
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
     # Positions are rounded to this many significant digits of the model's size: a step of the
-    # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md).
+    # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
+    # bake.scratch.numbers.position_decimals, the grid the BSP builds on too).
     precision: int = 5
     # Vertex numbering: "first-use" = in the order the written triangles first use them (the
     # index lists then pack to a symbol or two per corner); "scene" = the scene's order.
@@ -919,6 +932,12 @@ def validate(cfg: Config) -> None:
          "raise one of them")
     need(cfg.bsp.split_weight >= 0 and cfg.bsp.balance_weight >= 0, "bsp.split_weight",
          "weights must be >= 0")
+    need(cfg.bsp.edge_planes >= 0, "bsp.edge_planes", "must be >= 0 (0 = face planes only)")
+    need(cfg.bsp.edge_plane_cost >= 0, "bsp.edge_plane_cost", "must be >= 0")
+    need(cfg.bsp.score_sample >= 0, "bsp.score_sample", "must be >= 0 (0 = score on every face)")
+    need(cfg.bsp.score_refine >= 1, "bsp.score_refine", "must be >= 1")
+    need(cfg.bsp.ensemble >= 1, "bsp.ensemble", "must be >= 1 (1 = off)")
+    need(cfg.bsp.ensemble_max >= 0, "bsp.ensemble_max", "must be >= 0")
     need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")

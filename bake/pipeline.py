@@ -22,6 +22,7 @@ from .config import Config, ImportJob
 from .errors import BakeError, ConfigError, InputError, StageError
 from .record import StageRecord
 from .scene import MAX_COORDINATE, MIN_EXTENT, Scene
+from .scratch.numbers import position_decimals
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,19 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec("export", "bake.export.lists:stage", lambda c: c.export,
               lambda c: c.export.enabled, "export.enabled"),
 )
+
+
+# Stages that build on the positions as the export will write them (docs/formats.md, "Numbers").
+GRID_USERS = ("bsp", "export")
+
+
+def with_grid(scene: Scene, cfg: Config) -> Scene:
+    """The scene with the grid its positions will be written on (``export.precision`` of the
+    scene's size), fixed once, before the first stage in GRID_USERS runs. Stages read it from the
+    scene, never from the export section."""
+    if scene.position_decimals is not None or not cfg.export.enabled:
+        return scene
+    return scene.replace(position_decimals=position_decimals(scene.scale(), cfg.export.precision))
 
 
 def stage_names() -> list[str]:
@@ -180,6 +194,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     for i in range(start, len(active)):
         spec = active[i]
         fn = spec.load()
+        if spec.name in GRID_USERS:
+            scene = with_grid(scene, cfg)
         if progress:
             progress(spec.name, "start")
         counts_in = counts(scene)

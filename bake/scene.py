@@ -126,6 +126,10 @@ class Scene:
     # reorder triangles after it must carry it (and tri_lightmap_uvs) along.
     face_albedo: np.ndarray | None = None
     tri_lightmap_uvs: np.ndarray | None = None  # (T, 3, 2) lightmap UVs per corner (v up, in [0, 1])
+    # Positions are written rounded to this many decimals (the grid of
+    # bake.scratch.numbers.position_decimals); set by the pipeline before the first stage that
+    # builds on the written positions (bsp, export). None: not known (exact positions).
+    position_decimals: int | None = None
     # the rest
     materials: tuple[Material, ...] = (DEFAULT_MATERIAL,)
     lights: tuple[Light, ...] = ()

@@ -17,6 +17,13 @@ is a leaf: the priority clusters of Schumacker et al. (a convex or a concave pie
 no edge at all). Double-sided faces add the other three facing combinations; degenerate faces
 hide nothing. Sets above ``leaf_max`` peel only the faces of their convex hull (cheap).
 
+Candidate planes of a core: face planes (sampled), *edge planes* (through an edge of one fragment
+and a corner of another: along existing edges, between the two faces of the edge), and gap/axis
+planes. Large nodes score them on a sample of their fragments and rescore the best few exactly.
+Optionally (``ensemble`` > 1) each small node is built to the end from several of its best
+planes and the cheapest subtree is grafted in. Planes equal after rounding share one offset
+(``_Builder.share``), so they share one written entry.
+
 The builder works one *level* at a time: every open node of a depth is tested, scored and split
 together with array operations (a Python loop per level and per candidate slot, never per face).
 Everything is in normalised coordinates (see ``split.py``).
@@ -24,6 +31,8 @@ Everything is in normalised coordinates (see ``split.py``).
 
 from __future__ import annotations
 
+import bisect
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -31,14 +40,14 @@ import numpy as np
 
 from scipy.spatial import ConvexHull
 
-from .split import FaceStore, classify, distances, split_faces
+from .split import FaceStore, split_faces
 
 
 @dataclass
 class BuildOptions:
     candidates: int = 64  # candidate planes per node (0 = every face of the node)
     split_weight: float = 4.0  # per triangle a cut adds (qbsp-style 8 per cut fragment)
-    balance_weight: float = 1.0
+    balance_weight: float = 0.5
     coplanar_weight: float = 0.0
     seed: int = 0
     leaves: str = "priority"  # "none" (classic), "convex", "priority"
@@ -53,14 +62,12 @@ class BuildOptions:
     # along a diagonal) or "pieces" (1 per fragment cut, the classic count)
     hull_peel: bool = True  # peel the convex-hull faces of sets larger than leaf_max
     peeled_candidates: bool = True  # planes of peeled fragments are candidates for the core
-    lookahead: int = 0
-    root_plane: object = None
-    capture: object = None
-    sweep: bool = False
-    sweep_dirs: int = 0
-    free_planes: int = 0
-    free_min: int = 0
-    core_weight: float = 1.0
+    edge_planes: int = 64  # planes through an edge of one fragment and a corner of another
+    edge_plane_cost: float = 0.3  # ... used only where their cuts add <= this many triangles per fragment
+    score_sample: int = 512  # larger nodes pre-score candidates on this many fragments ...
+    score_refine: int = 4  # ... and rescore their best few exactly
+    ensemble: int = 1  # nodes of at most ensemble_max fragments are built this many times ...
+    ensemble_max: int = 128  # ... and the cheapest subtree is kept (ensemble 1: off)
     fragments: str = "polygons"  # "fans": triangulate every cut piece at once (for comparison)
 
 
@@ -114,18 +121,8 @@ def hide_graph(store: FaceStore, table: np.ndarray, eps: float) -> np.ndarray:
     ids = np.where(valid, table, 0)
     cnt = store.count[ids]
     K = int(cnt.max())
-    P = store.pos[ids, :K]  # (B, m, K, 3)
-    pl = store.planes_of(ids)  # (B, m, 4)
-    live = valid & ~store.degenerate_of(ids)
-    return hide_raw(P, pl, store.two_sided_of(ids) & valid, live, eps)
-
-
-def hide_raw(P, pl, ts, live, eps):
-    """:func:`hide_graph` on raw padded polygons ``P (B, m, K, 3)`` with planes ``pl (B, m, 4)``,
-    two-sided flags and which slots are live (valid and not degenerate)."""
-    B, m, K = P.shape[:3]
-    P = P.astype(np.float32)
-    pl = pl.astype(np.float32)
+    P = store.pos[ids, :K].astype(np.float32)  # (B, m, K, 3)
+    pl = store.planes_of(ids).astype(np.float32)  # (B, m, 4)
     e = np.float32(eps)
     beh = inf = None  # [b, i, j]: part of j behind / in front of plane i
     for k in range(K):
@@ -136,10 +133,12 @@ def hide_raw(P, pl, ts, live, eps):
             beh |= Dk < -e
             inf |= Dk > e
     M = beh & inf.transpose(0, 2, 1)
+    ts = store.two_sided_of(ids) & valid
     if ts.any():
         M |= ts[:, :, None] & inf & inf.transpose(0, 2, 1)
         M |= ts[:, None, :] & beh & beh.transpose(0, 2, 1)
         M |= (ts[:, :, None] & ts[:, None, :]) & inf & beh.transpose(0, 2, 1)
+    live = valid & ~store.degenerate_of(ids)
     M &= live[:, :, None] & live[:, None, :]
     M &= ~np.eye(m, dtype=bool)[None]
     return M
@@ -258,33 +257,8 @@ def hull_peel(store: FaceStore, ids: np.ndarray, eps: float, hull_above: int = 5
     return status
 
 
-def clip_pieces(P, cnt, d):
-    """Front and back pieces of padded convex polygons cut by their snapped distances ``d``
-    (no store, no attributes): ((front P, count), (back P, count))."""
-    m, K = P.shape[:2]
-    k = np.arange(K)[None, :]
-    valid = k < cnt[:, None]
-    nxt = (k + 1) % cnt[:, None]
-    d1 = np.take_along_axis(d, nxt, axis=1)
-    cross = valid & (d * d1 < 0)
-    pos_first = d > 0
-    ia = np.where(pos_first, k, nxt)
-    ib = np.where(pos_first, nxt, k)
-    da = np.take_along_axis(d, ia, axis=1)
-    db = np.take_along_axis(d, ib, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(cross, da / (da - db), 0.0)[..., None]
-    Pa, Pb = np.take_along_axis(P, ia[..., None], 1), np.take_along_axis(P, ib[..., None], 1)
-    cand = np.stack([P, Pa + t * (Pb - Pa)], axis=2).reshape(m, 2 * K, 3)
-    out = []
-    for keep in (np.stack([valid & (d >= 0), cross], 2).reshape(m, 2 * K),
-                 np.stack([valid & (d <= 0), cross], 2).reshape(m, 2 * K)):
-        c = keep.sum(1)
-        kmax = max(3, int(c.max())) if m else 3
-        order = np.argsort(~keep, axis=1, kind="stable")[:, :kmax]
-        order = np.where(np.arange(kmax)[None] < c[:, None], order, order[:, :1])
-        out.append((np.take_along_axis(cand, order[..., None], 1), c))
-    return out
+KIND_FACE, KIND_EDGE, KIND_GAP, KIND_AXIS = 0, 1, 2, 3
+KIND_NAMES = {KIND_FACE: "face_planes", KIND_EDGE: "edge_planes", KIND_GAP: "gap_planes", KIND_AXIS: "axis_planes"}
 
 
 # ---------------------------------------------------------------------------- the builder
@@ -308,7 +282,9 @@ class _Builder:
         self.suf = ([], [])
         self.stats = {"splits": 0, "kept_whole": 0, "levels": 0, "leaf_seconds": 0.0,
                       "choose_seconds": 0.0, "split_seconds": 0.0, "peeled": 0, "convex_leaves": 0,
-                      "gap_planes": 0, "axis_planes": 0, "face_planes": 0, "exact_planes": 0}
+                      "gap_planes": 0, "axis_planes": 0, "face_planes": 0, "edge_planes": 0,
+                      "exact_planes": 0, "ensembles": 0, "ensemble_seconds": 0.0, "shared_planes": 0}
+        self.registry: dict[tuple, list] = {}  # canonical rounded normal -> sorted world offsets used
 
     def new_nodes(self, k: int, depth: int, sizes: np.ndarray) -> np.ndarray:
         first = self.n_nodes
@@ -326,6 +302,33 @@ class _Builder:
         self.n_nodes = first + k
         return np.arange(first, first + k)
 
+    def share(self, planes: np.ndarray, world: np.ndarray, found: np.ndarray):
+        """Planes of this level that are one plane with a plane used before (or with each other):
+        same rounded normal (either orientation), offsets within half the tolerance. They take
+        the first one's offset, so they share one ``bsp planes`` entry and the tree is built with
+        exactly the plane that is written. Returns the planes, changed in place."""
+        tol = 0.5 * self.opt.epsilon * self.scale
+        for a in np.flatnonzero(found):
+            n, d = world[a, :3], world[a, 3]
+            nz = np.flatnonzero(n)
+            if len(nz) == 0:
+                continue
+            s = 1.0 if n[nz[0]] > 0 else -1.0
+            key = tuple((n * s + 0.0).tolist())
+            offs = self.registry.setdefault(key, [])
+            cd = d * s
+            i = bisect.bisect_left(offs, cd)
+            near = [o for o in offs[max(0, i - 1):i + 1] if abs(o - cd) <= tol]
+            if near:
+                best = min(near, key=lambda o: abs(o - cd))
+                if best != cd:
+                    world[a, 3] = best * s + 0.0
+                    planes[a, 3] = (world[a, 3] - n @ self.center) / self.scale
+                    self.stats["shared_planes"] += 1
+            else:
+                offs.insert(i, cd)
+        return planes, world
+
     def quantise(self, n: np.ndarray, point: np.ndarray):
         """Planes with normals rounded to ``plane_decimals`` through ``point`` (normalised), the
         offset rounded to a scene-relative unit in world coordinates. Returns normalised (k, 4)
@@ -338,67 +341,152 @@ class _Builder:
         return np.concatenate([nq, dn[:, None]], 1), np.concatenate([nq, dw[:, None]], 1)
 
     # ------------------------------------------------------------------ candidates
-    def score_planes(self, Pc, deg, cnt, owner, starts, planes, valid, A):
-        """Scores ``(R, A)`` of R planes per node (``planes (R, A, 4)``), each against every
-        fragment of its node. ``Pc`` (3, K, L) float32 corner coordinates."""
+    def candidates(self, fids, owner, starts, rng, P, cnt, pool, pool_owner):
+        """Candidate planes of every open node as one flat list: (node, normalised plane, world
+        plane, kind). Kinds: face planes of sampled fragments (and of fragments peeled off the
+        node), edge planes (through an edge of one fragment and a corner of another), gap and
+        axis planes."""
+        st, opt = self.store, self.opt
+        A = len(starts) - 1
+        sizes = starts[1:] - starts[:-1]
+        out = []
+
+        def add(nd, n, point, kind, ok=None):
+            if ok is not None:
+                nd, n, point = nd[ok], n[ok], point[ok]
+            if len(nd):
+                pl, wo = self.quantise(n, point)
+                out.append((nd, pl, wo, np.full(len(nd), kind, np.int8)))
+
+        # face planes: up to `candidates` fragments per node, sampled without replacement
+        pool_sizes = np.bincount(pool_owner, minlength=A)
+        pool_starts = np.concatenate([[0], np.cumsum(pool_sizes)])
+        C = int(pool_sizes.max()) if opt.candidates <= 0 else opt.candidates
+        keys = rng.random(len(pool)) + st.degenerate_of(pool) * 2.0
+        order = np.lexsort((keys, pool_owner))
+        rank = np.arange(len(pool)) - pool_starts[pool_owner[order]]
+        take = order[(rank < C) & (keys[order] < 2.0)]
+        add(pool_owner[take], st.planes_of(pool[take])[:, :3], st.src_center[st.src[pool[take]]], KIND_FACE)
+        # edge planes: an edge of a random fragment and a corner of another (a node of m
+        # fragments gets at most 2m): planes along existing edges that pass between faces
+        if opt.edge_planes > 0:
+            ne = np.where(sizes >= 2, np.minimum(opt.edge_planes, 2 * sizes), 0)
+            nd = np.repeat(np.arange(A), ne)
+            j = starts[nd] + np.minimum((rng.random(len(nd)) * sizes[nd]).astype(np.int64), sizes[nd] - 1)
+            k = np.minimum((rng.random(len(nd)) * cnt[j]).astype(np.int64), cnt[j] - 1)
+            j2 = starts[nd] + np.minimum((rng.random(len(nd)) * sizes[nd]).astype(np.int64), sizes[nd] - 1)
+            k2 = np.minimum((rng.random(len(nd)) * cnt[j2]).astype(np.int64), cnt[j2] - 1)
+            a, b, c = P[j, k], P[j, (k + 1) % cnt[j]], P[j2, k2]
+            n = np.cross(b - a, c - a)
+            ln = np.linalg.norm(n, axis=1)
+            ok = ln > 1e-9 * np.linalg.norm(b - a, axis=1) * np.linalg.norm(c - a, axis=1)
+            add(nd, n / np.maximum(ln, 1e-300)[:, None], a, KIND_EDGE, ok)
+        if opt.gap_planes or opt.axis_planes:
+            lo, hi = P.min(1), P.max(1)
+            cen = (P * (np.arange(P.shape[1])[None, :] < cnt[:, None])[..., None]).sum(1) / cnt[:, None]
+            for ax in range(3):
+                n = np.zeros((A, 3))
+                n[:, ax] = 1.0
+                if opt.gap_planes:
+                    pt, valid = self.gap(lo[:, ax], hi[:, ax], owner, starts)
+                    p3 = np.zeros((A, 3))
+                    p3[:, ax] = pt
+                    add(np.arange(A), n, p3, KIND_GAP, valid)
+                if opt.axis_planes:
+                    c = cen[:, ax]
+                    o2 = np.lexsort((c, owner))
+                    p3 = np.zeros((A, 3))
+                    p3[:, ax] = c[o2[starts[:-1] + sizes // 2]]
+                    add(np.arange(A), n, p3, KIND_AXIS, sizes > 1)
+        if not out:
+            z = np.zeros(0, np.int64)
+            return z, np.zeros((0, 4)), np.zeros((0, 4)), z.astype(np.int8)
+        nd, pl, wo, kd = (np.concatenate(x) for x in zip(*out))
+        o = np.argsort(nd, kind="stable")
+        return nd[o], pl[o], wo[o], kd[o]
+
+    def score(self, Pc, deg, cnt, c_node, c_plane, c_kind, fpos, foff, fcount, sizes):
+        """Scores of candidate planes: candidate i against the fragments ``fpos[foff[a] :
+        foff[a] + fcount[a]]`` of its node ``a`` (all of them, or a sample whose counts are
+        scaled up to the node's size). ``Pc`` (3, K, L) float32 corners of the level's
+        fragments. Returns (score, cost); inf where the plane makes no progress."""
         opt = self.opt
         eps = np.float32(opt.epsilon)
-        R = planes.shape[0]
-        comp = [np.ascontiguousarray(planes[:, :, i], dtype=np.float32)[:, owner] for i in range(4)]
         exact = opt.split_cost == "triangles"
+        n_c = len(c_node)
+        sc = np.full(n_c, np.inf)
+        cost_out = np.zeros(n_c)
+        if n_c == 0:
+            return sc, cost_out
+        ln = fcount[c_node].astype(np.int64)
+        cum = np.cumsum(ln)
         K = Pc.shape[1]
-        d = np.empty_like(comp[0])
-        tmp = np.empty_like(comp[0])
-        mn = mx = on_corners = None
-        for k in range(K):
-            np.multiply(comp[0], Pc[0, k], out=d)
-            np.multiply(comp[1], Pc[1, k], out=tmp)
-            d += tmp
-            np.multiply(comp[2], Pc[2, k], out=tmp)
-            d += tmp
-            d -= comp[3]
-            if exact:
-                on = (d <= eps) & (d >= -eps)
-                if on_corners is None:
-                    on_corners = on.astype(np.int8)
-                    on0 = on
+        budget = 1_500_000
+        comp = np.ascontiguousarray(c_plane.T, dtype=np.float32)  # (4, n_c)
+        i0 = 0
+        while i0 < n_c:
+            i1 = max(i0 + 1, int(np.searchsorted(cum, cum[i0] - ln[i0] + budget, "right")))
+            cn, lc = c_node[i0:i1], ln[i0:i1]
+            seg = np.cumsum(lc) - lc
+            rep = np.repeat(np.arange(i1 - i0), lc)
+            within = np.arange(int(lc.sum())) - seg[rep]
+            f = fpos[foff[cn][rep] + within]
+            a, b, c, w = (comp[i, i0:i1][rep] for i in range(4))
+            fc = cnt[f]
+            # corners 0-2 of every fragment, further corners only where a fragment has them (the
+            # padding repeats corner 0 and would change nothing)
+            for k in range(K):
+                sel = None if k < 3 else np.flatnonzero(fc > k)
+                if sel is not None and len(sel) == 0:
+                    break
+                ff = f if sel is None else f[sel]
+                q = Pc[:, k, ff]  # (3, n) one gather of the corner's coordinates
+                if sel is None:
+                    d = a * q[0] + b * q[1] + c * q[2] - w
                 else:
-                    on_corners += on
-            if mn is None:
-                mn, mx = d.copy(), d.copy()
-            else:
-                np.minimum(mn, d, out=mn)
-                np.maximum(mx, d, out=mx)
-        if exact and K > 3:
-            # padding repeats corner 0: take its extra counts back
-            on_corners -= (K - cnt).astype(np.int8)[None, :] * on0
-        # straddling = has a part behind and a part in front; degenerate ones are never cut
-        has_b = mn < -eps
-        has_f = mx > eps
-        if deg.any():
-            fix = has_b & has_f & deg[None, :]
-            ahead = (mn + mx) >= 0
-            has_b &= ~(fix & ahead)
-            has_f &= ~(fix & ~ahead)
-        seg = starts[:-1]
-        n_b = np.add.reduceat(has_b, seg, axis=1, dtype=np.int32)
-        n_f = np.add.reduceat(has_f, seg, axis=1, dtype=np.int32)
-        span = has_b & has_f
-        n_sp = np.add.reduceat(span, seg, axis=1, dtype=np.int32)
-        # a cut adds 2 triangles, 1 through a corner, none along a diagonal
-        cost = n_sp if not exact else np.add.reduceat(
-            np.where(span, np.maximum(0, 2 - on_corners), 0), seg, axis=1, dtype=np.int32)
-        n = (starts[1:] - starts[:-1])[None, :]
-        fr, bk = n_f - n_sp, n_b - n_sp
-        on = n - n_b - n_f + n_sp
-        sc = opt.split_weight * cost + opt.balance_weight * np.abs(fr - bk) - opt.coplanar_weight * on
-        progress = (on > 0) | ((fr > 0) & (bk > 0))
-        return np.where(valid & progress, sc, np.inf)
+                    d = a[sel] * q[0] + b[sel] * q[1] + c[sel] * q[2] - w[sel]
+                on = np.abs(d) <= eps
+                if k == 0:
+                    mn, mx, on_c = d, d.copy(), on.astype(np.int8)
+                elif sel is None:
+                    np.minimum(mn, d, out=mn)
+                    np.maximum(mx, d, out=mx)
+                    on_c += on
+                else:
+                    mn[sel] = np.minimum(mn[sel], d)
+                    mx[sel] = np.maximum(mx[sel], d)
+                    on_c[sel] += on
+            has_b, has_f = mn < -eps, mx > eps
+            dg = deg[f]
+            if dg.any():  # degenerate fragments are never cut: they go with their middle
+                fix = has_b & has_f & dg
+                ahead = (mn + mx) >= 0
+                has_b &= ~(fix & ahead)
+                has_f &= ~(fix & ~ahead)
+            span = has_b & has_f
+            n_b = np.add.reduceat(has_b, seg, dtype=np.int64).astype(np.float64)
+            n_f = np.add.reduceat(has_f, seg, dtype=np.int64).astype(np.float64)
+            n_sp = np.add.reduceat(span, seg, dtype=np.int64).astype(np.float64)
+            cost = n_sp if not exact else np.add.reduceat(
+                np.where(span, np.maximum(0, 2 - on_c), 0), seg, dtype=np.int64).astype(np.float64)
+            m = sizes[cn].astype(np.float64)
+            f_ = m / lc  # sampled counts stand for the whole node
+            fr, bk = (n_f - n_sp) * f_, (n_b - n_sp) * f_
+            on_n = (lc - n_b - n_f + n_sp) * f_
+            cost *= f_
+            s_ = opt.split_weight * cost + opt.balance_weight * np.abs(fr - bk) - opt.coplanar_weight * on_n
+            progress = (on_n > 0) | ((fr > 0) & (bk > 0))
+            kd = c_kind[i0:i1]
+            progress &= (kd != KIND_EDGE) | (cost <= opt.edge_plane_cost * m)
+            sc[i0:i1] = np.where(progress, s_, np.inf)
+            cost_out[i0:i1] = cost
+            i0 = i1
+        return sc, cost_out
 
     def choose(self, fids, owner, starts, rng, extra=None, extra_owner=None):
-        """One plane per open node: the best of its candidates. Candidates are planes of the
-        node's fragments and of ``extra`` (fragments peeled off the node: their planes often
-        separate what is left); only ``fids`` are scored."""
+        """One plane per open node: the best-scored of its candidates. Nodes larger than
+        ``score_sample`` score every candidate on a sample of their fragments first and rescore
+        the ``score_refine`` best on all of them."""
         st, opt = self.store, self.opt
         A = len(starts) - 1
         L = len(fids)
@@ -412,183 +500,44 @@ class _Builder:
         if extra is not None and len(extra):
             pool = np.concatenate([fids, extra])
             pool_owner = np.concatenate([owner, extra_owner])
-        pool_sizes = np.bincount(pool_owner, minlength=A)
-        pool_starts = np.concatenate([[0], np.cumsum(pool_sizes)])
-        C = int(pool_sizes.max()) if opt.candidates <= 0 else opt.candidates
-        # sample C candidate fragments per node without replacement (seeded, stable)
-        keys = rng.random(len(pool)) + st.degenerate_of(pool) * 2.0
-        order = np.lexsort((keys, pool_owner))
-        rank = np.arange(len(pool)) - pool_starts[pool_owner[order]]
-        take = (rank < C) & (keys[order] < 2.0)
-        cand = np.full((A, C), -1, np.int64)
-        cand[pool_owner[order[take]], rank[take]] = pool[order[take]]  # fragment ids
-        best = np.full(A, np.inf)
+        c_node, c_plane, c_world, c_kind = self.candidates(fids, owner, starts, rng, P, cnt, pool, pool_owner)
+        S = opt.score_sample
+        big = (sizes > S) if S > 0 else np.zeros(A, bool)
+        if big.any():
+            keys = rng.random(L)
+            o = np.lexsort((keys, owner))
+            rank = np.arange(L) - starts[owner[o]]
+            samp = o[rank < np.where(big, S, sizes)[owner[o]]]
+            fcount = np.minimum(sizes, np.where(big, S, sizes))
+            foff = np.concatenate([[0], np.cumsum(fcount)[:-1]])
+            sc, _ = self.score(Pc, deg, cnt, c_node, c_plane, c_kind, samp, foff, fcount, sizes)
+            # rescore the best few of each sampled node exactly
+            o = np.lexsort((sc, c_node))
+            first = np.concatenate([[0], np.cumsum(np.bincount(c_node, minlength=A))[:-1]])
+            rank = np.arange(len(o)) - first[c_node[o]]
+            again = o[(rank < opt.score_refine) & big[c_node[o]] & np.isfinite(sc[o])]
+            again.sort()
+            sc[big[c_node]] = np.inf
+            if len(again):
+                sc[again], _ = self.score(Pc, deg, cnt, c_node[again], c_plane[again], c_kind[again],
+                                          np.arange(L), starts[:-1], sizes, sizes)
+        else:
+            sc, _ = self.score(Pc, deg, cnt, c_node, c_plane, c_kind, np.arange(L), starts[:-1], sizes, sizes)
+        o = np.lexsort((sc, c_node))
+        first = np.concatenate([[0], np.cumsum(np.bincount(c_node, minlength=A))[:-1]])
+        has = np.bincount(c_node, minlength=A) > 0
+        pick = o[first[has]]
+        self.last_cands = (c_node, c_plane, c_world, sc)
         best_plane = np.zeros((A, 4))
         best_world = np.zeros((A, 4))
-        best_kind = np.zeros(A, np.int8)
-        cen_all = (P * (np.arange(Kl)[None, :] < cnt[:, None])[..., None]).sum(1) / cnt[:, None]
-
-        allsc, allpl, allw, allk = [], [], [], []
-
-        def consider(planes, world, valid, kind):
-            """planes/world (R, A, 4), valid (R, A)"""
-            sc = self.score_planes(Pc, deg, cnt, owner, starts, planes, valid, A)
-            if opt.lookahead:
-                allsc.append(sc)
-                allpl.append(planes)
-                allw.append(world)
-                allk.append(np.full(sc.shape, kind, np.int8))
-            for r in range(len(sc)):
-                better = sc[r] < best
-                best[better] = sc[r][better]
-                best_plane[better] = planes[r][better]
-                best_world[better] = world[r][better]
-                best_kind[better] = kind
-
-        used = int((cand >= 0).any(0).sum())
-        R = max(1, min(used, 2_000_000 // max(1, L)))
-        for r0 in range(0, used, R):
-            c = cand[:, r0:r0 + R].T  # (R, A)
-            valid = c >= 0
-            cc = np.where(valid, c, 0)
-            fr = cc.ravel()
-            nrm = st.planes_of(fr)[:, :3]
-            planes, world = self.quantise(nrm, st.src_center[st.src[fr]])
-            consider(planes.reshape(*cc.shape, 4), world.reshape(*cc.shape, 4), valid, 0)
-            if opt.sweep:
-                nr = nrm.reshape(*cc.shape, 3)
-                for r in range(len(nr)):
-                    t, ok = self.sweep(P, owner, starts, nr[r])
-                    planes, world = self.quantise(nr[r], t[:, None] * nr[r])
-                    consider(planes[None], world[None], (ok & valid[r])[None], 4)
-        for r in range(opt.sweep_dirs):
-            n = rng.normal(size=(A, 3))
-            n /= np.linalg.norm(n, axis=1)[:, None]
-            t, ok = self.sweep(P, owner, starts, n)
-            planes, world = self.quantise(n, t[:, None] * n)
-            consider(planes[None], world[None], ok[None], 5)
-        if opt.free_planes:
-            # planes through three random corners of the node's fragments
-            F = opt.free_planes
-            for r0 in range(F):
-                pick = []
-                for t in range(3):
-                    u = rng.random(A)
-                    j = starts[:-1] + np.minimum((u * sizes).astype(np.int64), sizes - 1)
-                    kk = (rng.random(A) * cnt[j]).astype(np.int64)
-                    pick.append(P[j, kk])
-                n = np.cross(pick[1] - pick[0], pick[2] - pick[0])
-                ln = np.linalg.norm(n, axis=1)
-                ok = ln > 1e-9
-                n = n / np.maximum(ln, 1e-300)[:, None]
-                ok &= sizes >= opt.free_min
-                planes, world = self.quantise(n, pick[0])
-                consider(planes[None], world[None], ok[None], 3)
-        if opt.gap_planes or opt.axis_planes:
-            lo = P.min(1)
-            hi = P.max(1)
-            for ax in range(3):
-                if opt.gap_planes:
-                    pt, valid = self.gap(lo[:, ax], hi[:, ax], owner, starts)
-                    n = np.zeros((A, 3))
-                    n[:, ax] = 1.0
-                    p3 = np.zeros((A, 3))
-                    p3[:, ax] = pt
-                    planes, world = self.quantise(n, p3)
-                    consider(planes[None], world[None], valid[None], 1)
-                if opt.axis_planes:
-                    c = cen_all[:, ax]
-                    o2 = np.lexsort((c, owner))
-                    med = c[o2[starts[:-1] + sizes // 2]]
-                    n = np.zeros((A, 3))
-                    n[:, ax] = 1.0
-                    p3 = np.zeros((A, 3))
-                    p3[:, ax] = med
-                    planes, world = self.quantise(n, p3)
-                    consider(planes[None], world[None], (sizes > 1)[None], 2)
-        if opt.lookahead and allsc:
-            self.look(fids, starts, np.concatenate(allsc), np.concatenate(allpl), np.concatenate(allw),
-                      np.concatenate(allk), best, best_plane, best_world, best_kind)
-        # a node whose every candidate failed (all fragments degenerate): no plane
-        for k, name in ((0, "face_planes"), (1, "gap_planes"), (2, "axis_planes")):
-            self.stats[name] += int(((best_kind == k) & np.isfinite(best)).sum())
-        return best_plane, best_world, np.isfinite(best)
-
-    def look(self, fids, starts, sc, pl, wo, kind, best, best_plane, best_world, best_kind):
-        """One step of lookahead on small nodes: re-score the ``lookahead`` best candidates by
-        what the children leave unpeeled (their cyclic cores must be split again)."""
-        st, opt = self.store, self.opt
-        eps = opt.epsilon
-        k = opt.lookahead
-        sizes = starts[1:] - starts[:-1]
-        for a in np.flatnonzero((sizes <= opt.leaf_max) & np.isfinite(best)):
-            ids = fids[starts[a]:starts[a + 1]]
-            M = hide_graph(st, ids[None], eps)
-            top = np.argsort(sc[:, a], kind="stable")[:k]
-            top = top[np.isfinite(sc[top, a])]
-            bsc = np.inf
-            for r in top:
-                plane = pl[r, a]
-                d = distances(st.pos[ids], np.repeat(plane[None], len(ids), 0), eps)
-                lab = classify(d, st.degenerate_of(ids), st.count[ids])
-                core = 0
-                X = lab == 3
-                (fP, fc), (bP, bc) = clip_pieces(st.pos[ids[X]], st.count[ids[X]], d[X])
-                for side, pP in ((0, fP), (1, bP)):
-                    keep = lab == side
-                    K2 = max(st.K, pP.shape[1])
-                    Pw = st.pos[ids[keep]]
-                    if K2 > Pw.shape[1]:
-                        Pw = np.concatenate([Pw, np.repeat(Pw[:, :1], K2 - Pw.shape[1], 1)], 1)
-                    if K2 > pP.shape[1]:
-                        pP = np.concatenate([pP, np.repeat(pP[:, :1], K2 - pP.shape[1], 1)], 1)
-                    Pc = np.concatenate([Pw, pP])
-                    ii = np.concatenate([ids[keep], ids[X]])
-                    if len(ii) == 0:
-                        continue
-                    live = ~st.degenerate_of(ii)
-                    Mc = hide_raw(Pc[None], st.planes_of(ii)[None], st.two_sided_of(ii)[None], live[None], eps)
-                    stt, _ = peel(Mc, np.ones((1, len(ii)), bool))
-                    core += int((stt == 0).sum())
-                total = sc[r, a] + opt.core_weight * core
-                if total < bsc:
-                    bsc = total
-                    best_plane[a] = plane
-                    best_world[a] = wo[r, a]
-                    best_kind[a] = kind[r, a]
-
-    def sweep(self, P, owner, starts, n):
-        """Per node, the offset along direction ``n[a]`` with the best estimated score
-        (cuts counted as 2 triangles, balance of the rest), among the fragments' extreme
-        positions. Returns (offset, valid) per node."""
-        opt = self.opt
-        eps = opt.epsilon
-        A = len(starts) - 1
-        proj = np.einsum("lkc,lc->lk", P, n[owner])
-        lo, hi = proj.min(1), proj.max(1)
-        base = owner * 8.0
-        klo = np.sort(base + lo)
-        khi = np.sort(base + hi)
-        m = (starts[1:] - starts[:-1])[owner]
-        res = []
-        for t in (hi, lo):
-            a_ = np.searchsorted(klo, base + t - eps, "left") - starts[owner]
-            bn = starts[owner + 1] - np.searchsorted(khi, base + t + eps, "right")
-            sc = opt.split_weight * 2.0 * np.maximum(0, a_ + bn - m) + opt.balance_weight * np.abs(bn - a_)
-            ok = (m - a_ > 0) & (m - bn > 0)
-            res.append((t, np.where(ok, sc, np.inf)))
-        t = np.concatenate([res[0][0], res[1][0]])
-        sc = np.concatenate([res[0][1], res[1][1]])
-        own = np.concatenate([owner, owner])
-        o = np.lexsort((sc, own))
-        firsts = np.ones(len(o), bool)
-        firsts[1:] = own[o][1:] != own[o][:-1]
-        pick = o[firsts]
-        out_t = np.zeros(A)
-        out_ok = np.zeros(A, bool)
-        out_t[own[pick]] = t[pick]
-        out_ok[own[pick]] = np.isfinite(sc[pick])
-        return out_t, out_ok
+        found = np.zeros(A, bool)
+        nodes = c_node[pick]
+        best_plane[nodes] = c_plane[pick]
+        best_world[nodes] = c_world[pick]
+        found[nodes] = np.isfinite(sc[pick])
+        for kind, name in KIND_NAMES.items():
+            self.stats[name] += int(((c_kind[pick] == kind) & found[nodes]).sum())
+        return best_plane, best_world, found
 
     def gap(self, lo, hi, owner, starts):
         """Per node, the most balanced position along an axis that no fragment straddles."""
@@ -615,12 +564,18 @@ class _Builder:
         return pos, valid
 
     # ------------------------------------------------------------------ main loop
-    def run(self) -> None:
+    def run(self, owner0: np.ndarray | None = None, first: tuple | None = None) -> None:
+        """Build level by level. ``owner0``: start from several roots (root of each fragment);
+        ``first``: (planes, world) forced on the roots at the first level (no peeling there)."""
         st, opt = self.store, self.opt
         eps = opt.epsilon
         fids = np.arange(st.n)
-        owner = np.zeros(st.n, np.int64)
-        node_of = self.new_nodes(1, 0, np.array([st.n]))
+        if owner0 is None:
+            owner = np.zeros(st.n, np.int64)
+            node_of = self.new_nodes(1, 0, np.array([st.n]))
+        else:
+            owner = np.asarray(owner0, np.int64)
+            node_of = self.new_nodes(int(owner.max()) + 1, 0, np.bincount(owner))
         level = 0
         while len(fids) and level < opt.max_levels:
             A = len(node_of)
@@ -632,7 +587,7 @@ class _Builder:
             # ---- priority peeling / leaves
             status = np.zeros(len(fids), np.int8)
             key = np.zeros(len(fids), np.int64)
-            if opt.leaves != "none":
+            if opt.leaves != "none" and not (level == 0 and first is not None):
                 t = time.perf_counter()
                 small = np.flatnonzero(sizes <= opt.leaf_max)
                 status, key = priority_peel(st, fids, starts, small, eps, opt.leaves)
@@ -666,14 +621,25 @@ class _Builder:
             sizes, starts = _segments(owner, A)
             # ---- plane choice
             t = time.perf_counter()
-            planes, world, found = self.choose(fids, owner, starts, rng, *peeled)
-            if level == 0 and opt.root_plane is not None and len(node_of) == 1:
-                planes[0] = opt.root_plane
-                world[0] = opt.root_plane
-                found[0] = True
-            if opt.capture is not None:
-                opt.capture.append((fids.copy(), starts.copy(), planes.copy()))
+            if level == 0 and first is not None:
+                planes, world = first[0][node_of].copy(), first[1][node_of].copy()
+                found = np.ones(A, bool)
+            else:
+                planes, world, found = self.choose(fids, owner, starts, rng, *peeled)
             self.stats["choose_seconds"] += time.perf_counter() - t
+            if opt.ensemble > 1 and opt.ensemble_max > 0 and not (level == 0 and first is not None):
+                t = time.perf_counter()
+                done = self.ensemble(fids, owner, starts, node_of, sizes, level)
+                self.stats["ensemble_seconds"] += time.perf_counter() - t
+                if done.any():
+                    keepf = ~done[owner]
+                    fids = fids[keepf]
+                    remap = np.cumsum(~done) - 1
+                    owner = remap[owner[keepf]]
+                    node_of, planes, world, found = node_of[~done], planes[~done], world[~done], found[~done]
+                    A = len(node_of)
+                    if len(fids) == 0:
+                        break
             if not found.all():
                 # no candidate made progress (rounded normals can miss a huge face by more than
                 # epsilon): use the exact plane of the node's first non-degenerate fragment,
@@ -698,6 +664,7 @@ class _Builder:
                 node_of, planes, world = node_of[found], planes[found], world[found]
                 if len(fids) == 0:
                     break
+            planes, world = self.share(planes, world, np.ones(len(planes), bool))
             # ---- split
             t = time.perf_counter()
             n_before = st.n
@@ -706,6 +673,7 @@ class _Builder:
                 res = _fan_new_pieces(st, res, n_before)
             self.stats["splits"] += res.splits
             self.stats["kept_whole"] += res.kept_whole
+            self.stats["grid_kept"] = self.stats.get("grid_kept", 0) + res.grid_kept
             gl = node_of
             self.planes[gl] = planes
             self.world[gl] = world
@@ -731,6 +699,120 @@ class _Builder:
             node_of = np.concatenate([fnodes, bnodes])
             self.stats["split_seconds"] += time.perf_counter() - t
             level += 1
+
+    def ensemble(self, fids, owner, starts, node_of, sizes, level) -> np.ndarray:
+        """Nodes small enough (at most ``ensemble_max`` fragments) are finished here: each is
+        built ``ensemble`` times to the end, starting from its best-scored candidate planes,
+        and the subtree that adds the fewest triangles is kept. Returns which nodes were done."""
+        st, opt = self.store, self.opt
+        A = len(node_of)
+        c_node, c_plane, c_world, sc = self.last_cands
+        sel = (sizes <= opt.ensemble_max) & (sizes >= 2)
+        done = np.zeros(A, bool)
+        if not sel.any():
+            return done
+        o = np.lexsort((sc, c_node))
+        first = np.concatenate([[0], np.cumsum(np.bincount(c_node, minlength=A))[:-1]])
+        rank = np.arange(len(o)) - first[c_node[o]]
+        take = o[(rank < opt.ensemble) & sel[c_node[o]] & np.isfinite(sc[o])]
+        take = take[np.lexsort((sc[take], c_node[take]))]
+        if len(take) == 0:
+            return done
+        nodes = c_node[take]  # one copy per (node, candidate)
+        m = sizes[nodes]
+        copy = np.repeat(np.arange(len(take)), m)
+        within = np.arange(int(m.sum())) - np.repeat(np.cumsum(m) - m, m)
+        dup = fids[starts[nodes][copy] + within]
+        sub = st.child(dup)
+        so = dataclasses.replace(opt, ensemble=1)
+        b = _Builder(sub, so, self.center, self.scale)
+        b.registry = {k: list(v) for k, v in self.registry.items()}
+        b.run(copy, (c_plane[take], c_world[take]))
+        tr = b.tree()
+        fr = tr.fragments()
+        root = b.root_of()
+        tri = np.bincount(root[np.concatenate([tr.on_node, tr.pre_node, tr.suf_node])],
+                          weights=sub.count[fr] - 2, minlength=len(take))
+        tri -= np.bincount(copy, weights=sub.count[:len(dup)] - 2, minlength=len(take))
+        # the cheapest copy of each node (ties: the better-scored first plane)
+        oo = np.lexsort((np.arange(len(take)), tri, nodes))
+        firsts = np.ones(len(oo), bool)
+        firsts[1:] = nodes[oo][1:] != nodes[oo][:-1]
+        best = oo[firsts]
+        if False:
+            print("ensemble costs", tri, "sizes", m[:3], "picked", best)
+        self.graft(b, tr, root, best, node_of[nodes[best]], dup)
+        done[nodes[best]] = True
+        self.stats["ensembles"] += len(best)
+        return done
+
+    def root_of(self) -> np.ndarray:
+        """The root (first-level node) each node descends from."""
+        n = self.n_nodes
+        root = np.arange(n)
+        parent = np.full(n, -1, np.int64)
+        for ch in (self.front[:n], self.back[:n]):
+            has = ch >= 0
+            parent[ch[has]] = np.flatnonzero(has)
+        depth = self.depth[:n]
+        for dd in range(1, int(depth.max()) + 1 if n else 1):
+            at = np.flatnonzero(depth == dd)
+            root[at] = root[parent[at]]
+        return root
+
+    def graft(self, b: "_Builder", tr: Tree, root: np.ndarray, roots: np.ndarray, targets: np.ndarray,
+              dup: np.ndarray) -> None:
+        """Copy the subtrees of ``b`` under ``roots`` into this tree, root ``roots[i]`` becoming
+        node ``targets[i]``; fragments the sub-build made are appended to this store."""
+        st = self.store
+        n = b.n_nodes
+        keep = np.zeros(n, bool)
+        keep[np.isin(root, roots)] = True
+        nmap = np.full(n, -1, np.int64)
+        nmap[roots] = targets
+        inner = np.flatnonzero(keep & (nmap < 0))
+        base_depth = np.zeros(n, np.int64)
+        base_depth[roots] = self.depth[targets]
+        if len(inner):
+            nmap[inner] = self.new_nodes(len(inner), 0, b.sizes[inner])
+            self.depth[nmap[inner]] = base_depth[root[inner]] + b.depth[inner]
+        kn = np.flatnonzero(keep)
+        tgt = nmap[kn]
+        self.planes[tgt] = b.planes[kn]
+        self.world[tgt] = b.world[kn]
+        for w in b.world[kn][~np.isnan(b.world[kn, 0])]:  # their planes are used now
+            nz = np.flatnonzero(w[:3])
+            if len(nz):
+                sg = 1.0 if w[nz[0]] > 0 else -1.0
+                offs = self.registry.setdefault(tuple((w[:3] * sg + 0.0).tolist()), [])
+                i = bisect.bisect_left(offs, w[3] * sg)
+                if i >= len(offs) or offs[i] != w[3] * sg:
+                    offs.insert(i, w[3] * sg)
+        for mine, theirs in ((self.front, b.front), (self.back, b.back)):
+            ch = theirs[kn]
+            mine[tgt] = np.where(ch >= 0, nmap[np.maximum(ch, 0)], -1)
+        # fragments: copies map back to the originals, new pieces are appended
+        sub = b.store
+        n0 = len(dup)
+        used = []
+        for ids, nodes in ((tr.on_ids, tr.on_node), (tr.pre_ids, tr.pre_node), (tr.suf_ids, tr.suf_node)):
+            used.append(ids[keep[nodes]])
+        used = np.concatenate(used)
+        new = np.unique(used[used >= n0])
+        fmap = np.full(sub.n, -1, np.int64)
+        fmap[:n0] = dup
+        if len(new):
+            fmap[new] = st.append(sub.pos[new], sub.attr[new], sub.vid[new], sub.count[new], sub.src[new])
+            st.whole[fmap[new]] = sub.whole[new]
+        k = keep[tr.on_node]
+        self.on[0].append(fmap[tr.on_ids[k]])
+        self.on[1].append(nmap[tr.on_node[k]])
+        self.on[2].append(tr.on_side[k])
+        for lists, ids, nodes in ((self.pre, tr.pre_ids, tr.pre_node), (self.suf, tr.suf_ids, tr.suf_node)):
+            k = keep[nodes]
+            lists[0].append(fmap[ids[k]])
+            lists[1].append(nmap[nodes[k]])
+        self.stats["splits"] += len(new)
 
     def tree(self) -> Tree:
         def cat(xs, dt):

@@ -29,6 +29,7 @@ class SourceFaces:
     tri_start: np.ndarray  # (S + 1,) CSR into tri_list
     tri_list: np.ndarray  # the scene triangles each source face stands for
     merged: int  # triangles absorbed into another face
+    dropped: int = 0  # input triangles left out (collapsed to a line or point by rounding)
 
 
 def merge_coplanar(pos_n: np.ndarray, tris: np.ndarray, attr: np.ndarray, group: np.ndarray,
@@ -82,7 +83,7 @@ def merge_coplanar(pos_n: np.ndarray, tris: np.ndarray, attr: np.ndarray, group:
         i, j = first[pair_ok], first[pair_ok] + 1
         fp, fq = e_f[i], e_f[j]
         ok = (fp != fq) & (e_a[i] != e_a[j]) & (grp[fp] == grp[fq]) & ~degen[fp] & ~degen[fq]
-        ok &= np.einsum("ij,ij->i", plane[fp, :3], plane[fq, :3]) >= 1.0 - 1e-9
+        ok &= np.einsum("ij,ij->i", plane[fp, :3], plane[fq, :3]) >= 1.0 - 1e-6  # the corner test below decides
         i, j, fp, fq = i[ok], j[ok], fp[ok], fq[ok]
         if len(i) == 0:
             break

@@ -23,6 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 
+MIN_COS_TILT = np.cos(np.radians(30.0))  # a face tilted further is not in a plane's coplanar group
+
+
 @dataclass
 class SplitResult:
     """Fragment ids after classifying (and cutting) a batch of fragments, each by its own plane.
@@ -37,6 +40,7 @@ class SplitResult:
     on_side: np.ndarray  # 0: seen from the front (normal along the plane's), 1: from the back, 2: both
     splits: int  # fragments cut in two
     kept_whole: int  # straddling fragments not cut because a piece would be below min area
+    grid_kept: int = 0  # ... of them, because a piece snapped to the grid would be collapsed or tilted
 
 
 class FaceStore:
@@ -58,6 +62,7 @@ class FaceStore:
         self.src = np.zeros(cap, np.int64)
         self.whole = np.zeros(cap, bool)
         self.n = 0
+        self.grid = None  # (center, scale, decimals): cut vertices snapped to the written grid
         self.src_plane = np.asarray(src_plane, np.float64)
         self.src_degenerate = np.asarray(src_degenerate, bool)
         self.src_two_sided = np.asarray(src_two_sided, bool)
@@ -65,6 +70,26 @@ class FaceStore:
         # a point of each source plane shared by all its fragments (so they share one plane)
         self.src_center = (pos * k[..., None]).sum(1) / np.maximum(np.asarray(count), 1)[:, None]
         self.append(pos, attr, vid, count, np.arange(S), whole=True)
+
+    def child(self, ids: np.ndarray) -> "FaceStore":
+        """A new store with the same source faces holding copies of fragments ``ids`` (in order,
+        as its fragments 0 .. len(ids) - 1)."""
+        c = object.__new__(FaceStore)
+        c.K, c.A = self.K, self.A
+        cap = max(16, 2 * len(ids))
+        c.pos = np.zeros((cap, self.K, 3))
+        c.attr = np.zeros((cap, self.K, self.A))
+        c.vid = np.full((cap, self.K), -1, np.int64)
+        c.count = np.zeros(cap, np.int64)
+        c.src = np.zeros(cap, np.int64)
+        c.whole = np.zeros(cap, bool)
+        c.n = 0
+        c.src_plane, c.src_degenerate, c.src_two_sided = self.src_plane, self.src_degenerate, self.src_two_sided
+        c.src_center = self.src_center
+        c.grid = self.grid
+        c.append(self.pos[ids], self.attr[ids], self.vid[ids], self.count[ids], self.src[ids])
+        c.whole[:len(ids)] = self.whole[ids]
+        return c
 
     # ------------------------------------------------------------------ storage
     def _grow(self, need_n: int, need_k: int) -> None:
@@ -104,6 +129,14 @@ class FaceStore:
         idx = np.arange(self.n, self.n + m)
         self.n += m
         return idx
+
+    def snap(self, P: np.ndarray) -> np.ndarray:
+        """Normalised points moved to the nearest point of the written grid (no grid: unchanged)."""
+        if self.grid is None:
+            return P
+        center, scale, dec = self.grid
+        w = np.round(P * scale + center, dec)
+        return (w - center) / scale
 
     # ------------------------------------------------------------------ queries
     def planes_of(self, idx: np.ndarray) -> np.ndarray:
@@ -170,7 +203,19 @@ def split_faces(store: FaceStore, idx: np.ndarray, planes: np.ndarray, owner: np
     d = distances(store.pos[idx], pl, eps)
     lab = classify(d, store.degenerate_of(idx), store.count[idx])
 
+    # a fragment within eps of the plane but tilted from it (a sliver, or a face rounding has
+    # tilted) is not one of the plane's coplanar faces: it goes with the side of its middle and is
+    # drawn, culled by its own facing, in that child
     on = lab == 2
+    if on.any():
+        oi = np.flatnonzero(on)
+        cosang = np.einsum("ij,ij->i", store.planes_of(idx[oi])[:, :3], pl[oi, :3])
+        tilt = oi[np.abs(cosang) < MIN_COS_TILT]
+        if len(tilt):
+            k = np.arange(store.K)[None, :] < store.count[idx[tilt]][:, None]
+            mid = (store.pos[idx[tilt]] * k[..., None]).sum(1) / store.count[idx[tilt]][:, None]
+            lab[tilt] = np.where(np.einsum("ij,ij->i", mid, pl[tilt, :3]) - pl[tilt, 3] >= 0, 0, 1)
+            on = lab == 2
     fn = store.planes_of(idx[on])[:, :3]
     aligned = np.einsum("ij,ij->i", fn, pl[on, :3]) >= 0
     side = np.where(aligned, 0, 1).astype(np.int8)
@@ -178,16 +223,16 @@ def split_faces(store: FaceStore, idx: np.ndarray, planes: np.ndarray, owner: np
 
     f_ids, f_own = [idx[lab == 0]], [owner[lab == 0]]
     b_ids, b_own = [idx[lab == 1]], [owner[lab == 1]]
-    splits = kept = 0
+    splits = kept = grid_kept = 0
     s = np.flatnonzero(lab == 3)
     if len(s):
-        fi, fo, bi, bo, splits, kept = _cut(store, idx[s], owner[s], d[s], min_area)
+        fi, fo, bi, bo, splits, kept, grid_kept = _cut(store, idx[s], owner[s], d[s], min_area)
         f_ids.append(fi)
         f_own.append(fo)
         b_ids.append(bi)
         b_own.append(bo)
     return SplitResult(np.concatenate(f_ids), np.concatenate(f_own), np.concatenate(b_ids),
-                       np.concatenate(b_own), idx[on], owner[on], side, splits, kept)
+                       np.concatenate(b_own), idx[on], owner[on], side, splits, kept, grid_kept)
 
 
 def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, min_area: float):
@@ -212,7 +257,7 @@ def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, mi
     t = t[..., None]
     Pa, Pb = np.take_along_axis(P, ia[..., None], 1), np.take_along_axis(P, ib[..., None], 1)
     Aa, Ab = np.take_along_axis(A, ia[..., None], 1), np.take_along_axis(A, ib[..., None], 1)
-    Pi = Pa + t * (Pb - Pa)
+    Pi = store.snap(Pa + t * (Pb - Pa))  # on the grid the positions are written on
     Ai = Aa + t * (Ab - Aa)
 
     candP = np.stack([P, Pi], axis=2).reshape(m, 2 * K, 3)
@@ -224,6 +269,21 @@ def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, mi
     bP, bA, bV, bc = _compact(candP, candA, candV, keep_b)
     fa, ba = polygon_area(fP), polygon_area(bP)
     ok = (fa >= min_area) & (ba >= min_area)
+    grid_bad = 0
+    if store.grid is not None:
+        # pieces as written: straight corners dropped, fanned from their best corner; a cut
+        # whose piece is still collapsed, flipped or tilted is not made
+        nrm = store.planes_of(idx)[:, :3]
+        gstep = 10.0 ** -store.grid[2] / store.grid[1]
+        good = np.ones(m, bool)
+        out = []
+        for Q, QA, QV, qc in ((fP, fA, fV, fc), (bP, bA, bV, bc)):
+            Q, QA, QV, qc, g = clean_pieces(Q, QA, QV, qc, nrm, gstep)
+            out.append((Q, QA, QV, qc))
+            good &= g
+        (fP, fA, fV, fc), (bP, bA, bV, bc) = out
+        grid_bad = int((ok & ~good).sum())
+        ok &= good
     whole_front = ~ok & (fa >= ba)
     whole_back = ~ok & (fa < ba)
     src = store.src[idx]
@@ -233,7 +293,64 @@ def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, mi
     front_o = np.concatenate([owner[whole_front], owner[ok]])
     back = np.concatenate([idx[whole_back], nb])
     back_o = np.concatenate([owner[whole_back], owner[ok]])
-    return front, front_o, back, back_o, int(ok.sum()), int((~ok).sum())
+    return front, front_o, back, back_o, int(ok.sum()), int((~ok).sum()), grid_bad
+
+
+def clean_pieces(P, A, V, cnt, nrm, step):
+    """Pieces whose corners sit on the written grid: corners that are straight (closer than a
+    grid step to the line through their neighbours) or turned the wrong way are dropped, then
+    each piece is rotated so that its fan from corner 0 is the best one. Returns the pieces and
+    whether each is good: at least 3 corners, and every fan triangle with positive area and a
+    normal within 30 degrees of the source plane's ``nrm``."""
+    m, K = P.shape[:2]
+    k = np.arange(K)[None, :]
+    for _ in range(K):
+        valid = k < cnt[:, None]
+        prv = np.take_along_axis(P, ((k - 1) % np.maximum(cnt, 1)[:, None])[..., None], 1)
+        nxt = np.take_along_axis(P, ((k + 1) % np.maximum(cnt, 1)[:, None])[..., None], 1)
+        turn = np.einsum("mkc,mc->mk", np.cross(P - prv, nxt - P), nrm)
+        base = np.linalg.norm(nxt - prv, axis=2)
+        height = turn / np.maximum(base, 1e-300)
+        cand = valid & (height < step) & (cnt[:, None] > 3)
+        if not cand.any():
+            break
+        # one corner per piece and round, the straightest (the next one may no longer be straight)
+        worst = np.argmin(np.where(cand, height, np.inf), axis=1)
+        drop = cand.any(1)[:, None] & (k == worst[:, None])
+        keep = valid & ~drop
+        order = np.argsort(~keep, axis=1, kind="stable")
+        cnt = keep.sum(1)
+        order = np.where(k < cnt[:, None], order, order[:, :1])
+        P = np.take_along_axis(P, order[..., None], 1)
+        A = np.take_along_axis(A, order[..., None], 1)
+        V = np.take_along_axis(V, order, 1)
+    # the best fan apex: the one whose worst triangle is least tilted
+    valid = k < cnt[:, None]
+    best_q = np.full(m, -np.inf)
+    best_r = np.zeros(m, np.int64)
+    for r in range(K):
+        q = np.full(m, np.inf)
+        apex = P[:, r] if r < K else P[:, 0]
+        for i in range(1, K - 1):
+            b = np.take_along_axis(P, ((r + i) % np.maximum(cnt, 1))[:, None, None].repeat(3, 2), 1)[:, 0]
+            c = np.take_along_axis(P, ((r + i + 1) % np.maximum(cnt, 1))[:, None, None].repeat(3, 2), 1)[:, 0]
+            n = np.cross(b - apex, c - apex)
+            ln = np.linalg.norm(n, axis=1)
+            cos = np.where(ln > 0, np.einsum("mc,mc->m", n, nrm) / np.maximum(ln, 1e-300), -1.0)
+            q = np.where(i < cnt - 1, np.minimum(q, cos), q)
+        q = np.where(r < cnt, q, -np.inf)
+        # a clear margin, so float noise never picks another corner for an equally good fan
+        # (a triangle's three fans are one triangle): the same input gives the same corners
+        better = q > best_q + 1e-6
+        best_q[better] = q[better]
+        best_r[better] = r
+    rot = (k + best_r[:, None]) % np.maximum(cnt, 1)[:, None]
+    rot = np.where(valid, rot, rot[:, :1])
+    P = np.take_along_axis(P, rot[..., None], 1)
+    A = np.take_along_axis(A, rot[..., None], 1)
+    V = np.take_along_axis(V, rot, 1)
+    good = (cnt >= 3) & (best_q >= MIN_COS_TILT)
+    return P, A, V, cnt, good
 
 
 def _compact(P, A, V, keep):

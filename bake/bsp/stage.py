@@ -8,6 +8,7 @@ big it is; only the written planes are in world units.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from typing import Any
@@ -17,7 +18,8 @@ import numpy as np
 from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
-from ..scratch.numbers import format_numbers, json_array, project_json_bytes
+from ..scratch.numbers import format_numbers, json_array, project_json_bytes, round_positions
+from .cost import blocks_estimate, walk_counts
 from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
 from .split import FaceStore, face_planes
@@ -66,23 +68,60 @@ def _groups(scene: Scene, two_sided: np.ndarray) -> np.ndarray:
     return g.ravel()
 
 
+def written_positions(scene: Scene) -> np.ndarray:
+    """The scene's positions as the export will write them: on the grid the pipeline fixed
+    (``scene.position_decimals``), or exact when there is none."""
+    if scene.position_decimals is None:
+        return scene.positions
+    return round_positions(scene.positions, scene.position_decimals)
+
+
+# Rounding to the grid moves a point by up to 0.87 step, so two faces closer than about two steps
+# can change sides when written: the tree treats them as coplanar (a tie) from the start.
+GRID_TIE = 2.0
+
+
+def tolerance(scene: Scene, opt: BuildOptions) -> float:
+    """The tree's on-plane tolerance (fraction of the diagonal): ``epsilon``, or two grid steps
+    when that is coarser (faces that close can swap sides when their corners are rounded)."""
+    if scene.position_decimals is None:
+        return opt.epsilon
+    return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
+
+
 def build(scene: Scene, opt: BuildOptions, merge: bool = True):
-    """Everything but writing the scene: (store, sources, tree, encoded, frame)."""
+    """Everything but writing the scene: (store, sources, tree, encoded, frame).
+
+    With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
+    they will be written: input positions rounded, every vertex a cut makes snapped to the grid,
+    a cut whose snapped pieces would be collapsed, flipped or tilted not made, triangles that
+    rounding collapses left out, and the on-plane tolerance at least a grid step."""
     center, scale = frame(scene)
-    pos_n = (scene.positions - center) / scale
-    tris = scene.triangles
+    opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
+    pos_w = written_positions(scene)
+    pos_n = (pos_w - center) / scale
+    keep = np.arange(scene.n_triangles)
+    if scene.position_decimals is not None:  # triangles rounding collapsed to a line or point
+        p = pos_w[scene.triangles]
+        keep = np.flatnonzero(np.any(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) != 0, axis=1))
+    tris = scene.triangles[keep]
     two_mat = np.array([m.double_sided for m in scene.materials], bool)
     two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
     attr, layout = _attributes(scene)
+    attr = attr[keep]
     seen = np.ones((len(tris), attr.shape[2]), bool)
     if "uv" in layout:  # an untextured material shows no UVs: they need not agree to merge
         textured = np.array([m.texture is not None or m.texture_data is not None for m in scene.materials], bool)
-        seen[:, layout["uv"]] = textured[np.clip(scene.tri_material, 0, len(textured) - 1)][:, None]
-    src = merge_coplanar(pos_n, tris, attr, _groups(scene, two), opt.epsilon, opt.min_area, enabled=merge,
-                         seen=seen)
+        seen[:, layout["uv"]] = textured[np.clip(scene.tri_material[keep], 0, len(textured) - 1)][:, None]
+    src = merge_coplanar(pos_n, tris, attr, _groups(scene, two)[keep], opt.epsilon, opt.min_area,
+                         enabled=merge, seen=seen)
+    src.tri_list = keep[src.tri_list]  # scene triangle numbers
+    src.dropped = int(scene.n_triangles - len(keep))
     plane, degen = face_planes(src.pos, src.count, opt.min_area)
     first_tri = src.tri_list[src.tri_start[:-1]]
     store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
+    if scene.position_decimals is not None:
+        store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
@@ -162,6 +201,8 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
             vid = vid.copy()
             vid[need] = V + inv.ravel()
             new_pos = uniq[:, :3] * scale + center
+            if scene.position_decimals is not None:  # made on the grid: keep them exactly there
+                new_pos = round_positions(new_pos, scene.position_decimals)
             new_vc = uniq[:, 3:]
             n_new = len(uniq)
         dst = slot[cf][rep] + (i - 1)
@@ -172,7 +213,8 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
             out_lm[dst] = cattr[..., lm_s]
         t_src = src.tri_list[src.tri_start[store.src[fr]]]
         out_src_tri[dst] = t_src
-    positions = np.concatenate([scene.positions, new_pos]) if n_new else scene.positions
+    base = written_positions(scene)
+    positions = np.concatenate([base, new_pos]) if n_new else base
     vcol = scene.vertex_colors
     if vcol is not None and n_new:
         vcol = np.concatenate([vcol, np.clip(new_vc, 0.0, 1.0)])
@@ -187,10 +229,24 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
         face_albedo=None if scene.face_albedo is None else scene.face_albedo[out_src_tri].copy(),
         tri_lightmap_uvs=out_lm,
     )
-    in_face = np.zeros(scene.n_triangles, np.int64)
+    in_face = np.full(scene.n_triangles, -1, np.int64)
     in_face[src.tri_list] = np.repeat(np.arange(len(src.count)), np.diff(src.tri_start))
     return new, {"new_vertices": n_new, "source_triangle": out_src_tri, "source_face": out_face,
                  "input_source_face": in_face}
+
+
+def typical_walk(scene: Scene, enc: Encoded) -> dict:
+    """One frame's walk from the eye the reader sprite starts with (bake.scratch.project.auto_camera:
+    in front of, above and left of the model): records, plane tests, ranges and the triangles in
+    them (and how many face the eye), and the Scratch blocks the walk costs (bake/bsp/cost.py)."""
+    from ..scratch.project import auto_camera
+
+    cam = auto_camera(scene.positions[scene.used_vertex_mask()])
+    eye = [cam.x, cam.y, cam.z]
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    counts = walk_counts(enc.nodes, enc.planes, scene.triangles, scene.positions, two, eye)
+    return {"eye": eye, **counts, "plane_tests": counts["split"], "blocks_estimate": blocks_estimate(counts)}
 
 
 def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tuple[int, int]:
@@ -220,8 +276,9 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     new = new.with_list(ScratchList(NODES_LIST, enc.nodes.copy(), 0, _NODES_DOC, "int"))
     new = new.with_list(ScratchList(PLANES_LIST, enc.planes.ravel().copy(), 4, _PLANES_DOC, "number"))
     stack_bound = 2 * enc.max_depth + 2
+    tol = tolerance(scene, opt)
     new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": stack_bound,
-                                    "epsilon": opt.epsilon,
+                                    "epsilon": tol,
                                     "source_triangle": info["source_triangle"],
                                     "source_face": info["source_face"],
                                     "input_source_face": info["input_source_face"]})
@@ -239,6 +296,8 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
         "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],
         "new_vertices": info["new_vertices"],
+        "grid": None if scene.position_decimals is None else 10.0 ** -scene.position_decimals,
+        "tolerance": tol, "collapsed_input_triangles": src.dropped, "grid_kept_whole": st.get("grid_kept", 0),
         "lists": {NODES_LIST: {"items": nodes_items, "project_json_bytes": nodes_bytes},
                   PLANES_LIST: {"items": planes_items, "project_json_bytes": planes_bytes}},
         "bytes_per_record": round((nodes_bytes + planes_bytes) / max(1, records), 3),
@@ -248,9 +307,15 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
                     "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
         "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
     }
+    rec.details["walk"] = typical_walk(new, enc)
+    if src.dropped:
+        rec.warn(f"{src.dropped} triangle(s) have zero area at the written positions (rounded to "
+                 f"{10.0 ** -scene.position_decimals:g}) and were left out")
     if st["kept_whole"]:
-        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been "
-                 f"below the minimum area ({opt.min_area:g} of diagonal^2)")
+        why = f"below the minimum area ({opt.min_area:g} of diagonal^2)"
+        if scene.position_decimals is not None:
+            why += " or collapsed, flipped or tilted on the written grid"
+        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been {why}")
     rec.seconds = time.perf_counter() - t0
     return new, rec
 

@@ -280,6 +280,32 @@ def _stages_section(report: dict) -> str:
             f"</tr>{''.join(eff)}</table>")
 
 
+def _bsp_section(report: dict) -> str:
+    """The BSP's cost to the author: triangles before and after, its lists' bytes, and one frame's
+    walk from the reader sprite's starting eye."""
+    st = next((x for x in report.get("stages", []) if x.get("name") == "bsp"), None)
+    d = (st or {}).get("details") or {}
+    if "inflation" not in d:
+        return ""
+    t_in = (st.get("counts_in") or {}).get("triangles", 0)
+    t_out = (st.get("counts_out") or {}).get("triangles", 0)
+    lists = d.get("lists", {})
+    nbytes = sum(v.get("project_json_bytes", 0) for v in lists.values())
+    rec = d.get("records", {})
+    w = d.get("walk") or {}
+    rows = [("triangles", f"{t_in:,} → {t_out:,} (+{d['inflation']:.1%})"),
+            ("records", f"{sum(rec.values()):,} ({rec.get('split', 0) + rec.get('split_two_sided', 0):,} split, "
+                        f"{rec.get('leaf', 0):,} leaf, {rec.get('peel', 0):,} peel); {d.get('planes', 0):,} planes"),
+            ("list bytes", f"{_fmt_bytes(nbytes)} in project.json ({d.get('bytes_per_triangle', 0):.1f} per triangle)")]
+    if w:
+        rows.append(("one frame's walk", f"from the reader's starting eye: {w['plane_tests']:,} plane tests, "
+                                         f"{w['ranges']:,} ranges of {w['triangles']:,} triangles "
+                                         f"({w['facing']:,} face the eye); ≈ {w['blocks_estimate']:,} blocks "
+                                         "(estimate fitted to scratch-vm, docs/formats-bsp.md)"))
+    body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in rows)
+    return f"<h2>BSP: what painter's order costs</h2><table>{body}</table>"
+
+
 def _lists_section(report: dict) -> str:
     lists = report.get("lists", {})
     total = max(sum(v["bytes"] for v in lists.values()), 1)
@@ -430,7 +456,8 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
         why = (f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
-    body += [_textures_section(textures), _stages_section(report), _lists_section(report), _sweeps_section(sweeps, report)]
+    body += [_textures_section(textures), _stages_section(report), _bsp_section(report), _lists_section(report),
+             _sweeps_section(sweeps, report)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
             f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"
             f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "

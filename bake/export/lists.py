@@ -36,7 +36,8 @@ from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
-from ..scratch.numbers import decimals_for, format_numbers, json_array, project_json_bytes, render_items
+from ..scratch.numbers import (decimals_for, format_numbers, json_array, position_decimals, project_json_bytes,
+                               render_items, round_positions)
 
 # An item with one of these is split by Scratch's import of a .txt file (scratch-gui
 # src/lib/import-csv.js: a .txt whose first, middle and last lines split into the same number of
@@ -167,11 +168,16 @@ def first_use_order(seq: np.ndarray, n: int) -> np.ndarray:
 def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
     n = cfg.names
     out: list[ScratchList] = []
+    # the grid the pipeline fixed on the scene (the BSP built on it); a scene run through this
+    # stage alone gets it from export.precision
     diag = scene.scale()
-    dec = decimals_for(diag * 10.0 ** (-cfg.precision))
+    dec = scene.position_decimals
+    if dec is None:
+        dec = position_decimals(diag, cfg.precision)
     T = scene.n_triangles
     tris = scene.triangles if scene.triangles is not None else np.zeros((0, 3), np.int64)
     mats = scene.tri_material if scene.tri_material is not None else np.zeros(0, np.int64)
+    _warn_collapsed(scene, tris, dec, record)
 
     keep_mask = np.ones(T, bool)
     quad_idx = np.zeros((0, 4), np.int64)  # 0-based corners of whole quads
@@ -353,6 +359,22 @@ def pack_lists(lists: list[ScratchList], values: dict[str, list], info: dict[str
                                       f"the loader rebuilds them at the green flag "
                                       f"({rec.details['pack']['decode_blocks']:,} blocks in scratch-vm)"})
     return out
+
+
+def _warn_collapsed(scene: Scene, tris: np.ndarray, dec: int, record: StageRecord) -> None:
+    """Triangles whose written (rounded) corners are collinear: a filler that strokes edges
+    draws them as lines. Counted in the record and named in a warning."""
+    if len(tris) == 0:
+        return
+    p = round_positions(scene.positions, dec)[tris]
+    flat = ~np.any(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) != 0, axis=1)
+    n = int(flat.sum())
+    record.details["collinear_triangles"] = n
+    if n:
+        first = ", ".join(str(int(t) + 1) for t in np.flatnonzero(flat)[:6])
+        record.warn(f"{n} triangle(s) have zero area at the written positions (rounded to {10.0 ** -dec:g}): "
+                    f"tris {first}{', ...' if n > 6 else ''}; a pen filler that strokes edges draws them "
+                    "as lines (raise export.precision, or bake with bsp, which drops them)")
 
 
 def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:

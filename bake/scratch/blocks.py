@@ -3,7 +3,8 @@
 Scripts are written as Python expressions and compiled into the sb3 block encoding described in
 shared/docs/scratch.md section 1 ("Blocks encoding"):
 
-* a block is ``{opcode, next, parent, inputs, fields, shadow, topLevel, x?, y?, mutation?}``;
+* a block is ``{opcode, next, parent, inputs, fields, shadow, topLevel, x?, y?, mutation?}``, written
+  without ``shadow``/``topLevel`` when false and ``inputs``/``fields`` when empty (:func:`_compact`);
 * an input is ``[1, shadow]``, ``[2, block]`` or ``[3, reporter, shadow]``; literal shadows are
   compressed primitives ``[4..8, "num"]``, ``[9, "#rrggbb"]``, ``[10, "text"]``; a variable or list
   reporter in an input is ``[12, name, id]`` / ``[13, name, id]``;
@@ -483,6 +484,8 @@ class Builder:
             blk["x"] = 0
             blk["y"] = y
             y += 120 + 48 * n_body
+        for blk in self._blocks.values():
+            _compact(blk)
         return self._blocks
 
     def _id(self) -> str:
@@ -625,6 +628,21 @@ class Builder:
         if isinstance(value, ListRef):
             return [13, value.name, self.scope.list_id(value.name)]
         return self._compile(value, parent)
+
+
+def _compact(blk: dict[str, Any]) -> None:
+    """Leave out the members whose absence means the same to the loaders: ``shadow`` and
+    ``topLevel`` when false, ``inputs`` and ``fields`` when empty. scratch-parser's schema requires
+    only ``opcode``; scratch-vm's and TurboWarp's deserializer (sb3.js ``deserializeBlocks``) turn
+    missing inputs/fields into ``{}`` and test ``shadow``/``topLevel`` for truth only (the TurboWarp
+    packager itself drops false ``shadow``/``topLevel``). ``next`` and ``parent`` stay, ``null``
+    included: the VM compares them with ``null`` (``getTopLevelScript``)."""
+    for key in ("shadow", "topLevel"):
+        if blk.get(key) is False:
+            del blk[key]
+    for key in ("inputs", "fields"):
+        if blk.get(key) == {}:
+            del blk[key]
 
 
 def _count(stmts: Stack) -> int:

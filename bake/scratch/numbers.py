@@ -29,6 +29,23 @@ def decimals_for(step: float) -> int:
     return max(0, int(math.ceil(-math.log10(step) - 1e-9)))
 
 
+def position_decimals(diagonal: float, precision: int) -> int:
+    """Decimals of the grid vertex positions are written on.
+
+    The grid step is ``10 ** -decimals``: the largest power of ten not above
+    ``diagonal * 10 ** -precision`` (never coarser than 1), and a position ``x`` is written as
+    ``round(x, decimals)`` (numpy's ``np.round``: nearest multiple of the step, ties to even).
+    Every stage that builds on the positions as they will be written (the BSP) and every list
+    that stores positions uses this one grid."""
+    return decimals_for(diagonal * 10.0 ** (-precision))
+
+
+def round_positions(positions: np.ndarray, decimals: int) -> np.ndarray:
+    """Positions snapped to the grid exactly as :func:`format_numbers` rounds them."""
+    a = np.asarray(positions, np.float64)
+    return np.where(np.abs(a) < 1e15, np.round(a, decimals), a) + 0.0
+
+
 def format_numbers(values: np.ndarray | list, decimals: int | None = None, *, name: str = "") -> list[str]:
     """Format a 1-D array as short decimal strings.
 

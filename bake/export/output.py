@@ -17,7 +17,7 @@ from typing import Any, Iterable
 from ..errors import ConfigError
 from ..pipeline import BakeResult
 from . import report as report_mod
-from .write import Outputs, check_writable_folder, depfile_text, output_error, remove_orphan_temps
+from .write import Outputs, check_writable_folder, depfile_text
 
 REPORT_FILES = ("report.json", "report.md", "report.html")
 
@@ -80,13 +80,7 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
     assets = {k: len(v) for k, v in files.items() if k.startswith("assets/")}
     reports = ["report.json", "report.md"] + (["report.html"] if cfg.report.html else [])
     with Outputs(out_dir, protect=protect) as outs:
-        outs.check(sorted(files) + reports)  # before anything is created
-        try:
-            out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise output_error(e, out_dir, "cannot create the output folder") from None
-        remove_orphan_temps(out_dir)
-        outs.add_all(files)
+        outs.start(files, also=reports)
         status = dict(outs.status)
         ours = set(files) | set(reports)
         for rel in outs.removals():

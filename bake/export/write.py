@@ -209,6 +209,17 @@ class Outputs:
                 raise ConfigError(f"output {rel} is a folder in the way; remove it or choose another --out",
                                   path=target)
 
+    def start(self, files: dict[str, bytes], also: list[str] = ()) -> None:
+        """Check every target (``files`` and ``also``, written later), create the folder, clear
+        temporaries a killed bake left, and stage ``files``."""
+        self.check(sorted(files) + list(also))  # before anything is created
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise output_error(e, self.out_dir, "cannot create the output folder") from None
+        remove_orphan_temps(self.out_dir)
+        self.add_all(files)
+
     def add_all(self, files: dict[str, bytes], *, always: tuple[str, ...] = ()) -> None:
         self.check(sorted(files))
         for rel in sorted(files):
@@ -327,13 +338,7 @@ def write_outputs(out_dir: Path, files: dict[str, bytes], *, protect: set[Path] 
     must not be removed as stale."""
     out_dir = Path(out_dir)
     with Outputs(out_dir, protect=protect, keep=also_ours) as outs:
-        outs.check(sorted(files))
-        try:
-            out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise output_error(e, out_dir, "cannot create the output folder") from None
-        remove_orphan_temps(out_dir)
-        outs.add_all(files)
+        outs.start(files)
         return outs.commit()
 
 

@@ -42,8 +42,6 @@ sys.path.insert(0, str(REPO / "vm"))
 from bake import config, pipeline  # noqa: E402
 from bake.scratch import pack as P  # noqa: E402
 from bake.scratch import sb3  # noqa: E402
-from bake.scratch.loader import total_cost  # noqa: E402
-from bake.scratch.numbers import json_array, project_json_bytes, render_items  # noqa: E402
 
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
 OUT = REPO / "benchmarks" / "results" / "pack.json"

@@ -6,11 +6,9 @@ the model a config names -- and each time ``make -q`` must see the one model out
 must rebake it alone, and then have nothing left to do.
 """
 
-import base64
 import json
 import os
 import shutil
-import struct
 import subprocess
 import sys
 import time

@@ -9,7 +9,6 @@ big it is; only the written planes are in world units.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from typing import Any
 

@@ -441,7 +441,6 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget: flo
     """
     import heapq
     import math
-    import time
 
     if bvh.n_nodes < 5:
         return bvh

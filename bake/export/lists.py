@@ -36,7 +36,7 @@ from ..errors import ConfigError
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
-from ..scratch.numbers import (decimals_for, format_numbers, json_array, position_decimals, project_json_bytes,
+from ..scratch.numbers import (decimals_for, json_array, position_decimals, project_json_bytes,
                                render_items, round_positions)
 
 # An item with one of these is split by Scratch's import of a .txt file (scratch-gui

@@ -36,7 +36,7 @@ def textimage_part(r) -> None:
     W, H = r.v("ti width"), r.v("ti height")
     tok, i, k, rest = r.v("_tok", ""), r.v("_ti i"), r.v("_ti k"), r.v("_rest", "")
     end, cnt, vf = r.v("_tend"), r.v("_tcount"), r.v("_tvf")
-    op, op2, rn, val = r.v("_top"), r.v("_top2"), r.v("_trn"), r.v("_tval")
+    op2, rn, val = r.v("_top2"), r.v("_trn"), r.v("_tval")
     R, G, Bv = r.v("_tr"), r.v("_tg"), r.v("_tb")
     dY, dU, dV, idx = r.v("_tdy"), r.v("_tdu"), r.v("_tdv"), r.v("_tidx")
     d0, d1, d2 = r.v("_td0"), r.v("_td1"), r.v("_td2")

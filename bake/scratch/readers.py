@@ -450,7 +450,7 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
 
 def _render_blocks(r: ReaderBuilder) -> None:
     m = r.spec.mesh
-    b, k = r.v("_b"), r.v("_k")
+    k = r.v("_k")
     fill = _fill_blocks(r)
     start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size)]
     # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence

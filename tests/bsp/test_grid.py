@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from bake import config, pipeline
+from bake import pipeline
 from bake.bsp.split import FaceStore, clean_pieces, split_faces
 from bake.scratch.numbers import position_decimals
 from conftest import corpus_path

@@ -8,7 +8,6 @@ import base64
 import io
 import json
 import os
-import re
 import shutil
 import subprocess
 from html.parser import HTMLParser

@@ -40,6 +40,9 @@ After the library (bake/mesh/simplify_repair.py for the local repairs):
    lowers the local error, and their free corners moved to lower the local *maximum*
    (a Chebyshev fit; ``simplify_repair.polish``); every move is kept only if the local maximum
    drops and no triangle turns against the input.
+   Then one *peak round* (with a triangle target and ``refine_rounds`` > 0): the input vertices
+   nearest the largest places the library cut off are locked and the whole stage runs once
+   more; kept if its measured max is lower (``details.peak_round``).
 4. the error is measured (bake/mesh/simplify_measure.py): a dense deterministic grid on both
    surfaces (every vertex, points along every edge, points inside every triangle), refined
    around the largest distances, the largest made exact at their points. The record gives the
@@ -104,6 +107,8 @@ _BORDER_TOLERANCE = 0.5
 _PEAK_SHARE = 0.8
 # ... at most this many separate places
 _PEAKS = 24
+# The peak round locks the input vertices at most this many of the largest cut-off places.
+_PEAK_LOCKS = 8
 # The least-squares fit pairs at most this many of the input's points with the result (and a
 # third as many random points of the result with the input).
 _FIT_POINTS = 60000
@@ -793,6 +798,31 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
     return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
 
 
+def _peak_round(ctx: _Ctx, out: _Out, h: HausdorffResult, whole, target: int, details: dict
+                ) -> tuple[_Out, HausdorffResult]:
+    """Features the library cut off (the input's points farthest from the result, within
+    _PEAK_SHARE of the maximum, up to _PEAK_LOCKS separate places) cannot be put back by
+    moving corners: the input vertex closest to each is locked and the whole stage runs once
+    more (library, repairs, fit, refine rounds). The new result is kept if its measured max is
+    lower, with no more defects and folds (teapot at 10%: 0.988% -> 0.531% of the diagonal)."""
+    ab = h.a_to_b
+    if ab is None or len(ab.peak_points) == 0:
+        return out, h
+    pts = ab.peak_points[ab.peak_dists >= _PEAK_SHARE * h.max][:_PEAK_LOCKS]
+    if len(pts) == 0:
+        return out, h
+    _, nv = cKDTree(ctx.prep.V).query(pts)
+    lock = np.zeros(len(ctx.prep.V), bool)
+    lock[nv] = True
+    o3, h3 = whole(target, lock)
+    if h3 is not None and ctx.cfg.refine_rounds:
+        o3, h3, _ = _refine(ctx, o3, h3)
+    keep = bool(h3 is not None and h3.max < h.max and _defects(o3) == 0 and _flaws(o3) <= _flaws(out))
+    details["peak_round"] = {"locked_vertices": int(lock.sum()), "hausdorff_max_before": float(h.max / ctx.scale),
+                             "hausdorff_max_after": None if h3 is None else float(h3.max / ctx.scale), "kept": keep}
+    return (o3, h3) if keep else (out, h)
+
+
 def _reassign(le: repair.LocalError, V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> None:
     """The input points that stood for a changed triangle: their closest triangle again."""
     pts, _ = le.points_of(changed)
@@ -1285,6 +1315,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             details["probes"] = probes
         if h is not None and cfg.refine_rounds:
             out, h, refine_log = _refine(ctx, out, h)
+            if "backed_off_from" not in details:
+                out, h = _peak_round(ctx, out, h, whole, target, details)
     else:
         target, out, h = _search_error(prep, method, value * scale, T0, whole, probes, scale)
         details["max_error_target"] = value

@@ -40,9 +40,9 @@ After the library (bake/mesh/simplify_repair.py for the local repairs):
    lowers the local error, and their free corners moved to lower the local *maximum*
    (a Chebyshev fit; ``simplify_repair.polish``); every move is kept only if the local maximum
    drops and no triangle turns against the input.
-   Then one *peak round* (with a triangle target and ``refine_rounds`` > 0): the input vertices
-   nearest the largest places the library cut off are locked and the whole stage runs once
-   more; kept if its measured max is lower (``details.peak_round``).
+   Then ``peak_rounds`` rounds (with a triangle target and ``refine_rounds`` > 0): the input
+   vertices nearest the largest places the library cut off are locked and the whole stage runs
+   again; a round is kept if its measured max is lower (``details.peak_rounds``).
 4. the error is measured (bake/mesh/simplify_measure.py): a dense deterministic grid on both
    surfaces (every vertex, points along every edge, points inside every triangle), refined
    around the largest distances, the largest made exact at their points. The record gives the
@@ -798,29 +798,39 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
     return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
 
 
-def _peak_round(ctx: _Ctx, out: _Out, h: HausdorffResult, whole, target: int, details: dict
-                ) -> tuple[_Out, HausdorffResult]:
-    """Features the library cut off (the input's points farthest from the result, within
-    _PEAK_SHARE of the maximum, up to _PEAK_LOCKS separate places) cannot be put back by
-    moving corners: the input vertex closest to each is locked and the whole stage runs once
-    more (library, repairs, fit, refine rounds). The new result is kept if its measured max is
-    lower, with no more defects and folds (teapot at 10%: 0.988% -> 0.531% of the diagonal)."""
-    ab = h.a_to_b
-    if ab is None or len(ab.peak_points) == 0:
-        return out, h
-    pts = ab.peak_points[ab.peak_dists >= _PEAK_SHARE * h.max][:_PEAK_LOCKS]
-    if len(pts) == 0:
-        return out, h
-    _, nv = cKDTree(ctx.prep.V).query(pts)
+def _peak_rounds(ctx: _Ctx, out: _Out, h: HausdorffResult, whole, target: int, details: dict
+                 ) -> tuple[_Out, HausdorffResult]:
+    """``peak_rounds`` rounds for features the library cut off (the input's points farthest
+    from the result, within _PEAK_SHARE of the maximum, up to _PEAK_LOCKS separate places),
+    which moving corners cannot put back: the input vertex closest to each is locked (with
+    those of the rounds before) and the whole stage runs again (library, repairs, fit, refine
+    rounds). A round's result is kept if its measured max is lower, with no more defects and
+    folds (teapot at 10%: 0.988% -> 0.531% of the diagonal)."""
+    log: list[dict] = []
     lock = np.zeros(len(ctx.prep.V), bool)
-    lock[nv] = True
-    o3, h3 = whole(target, lock)
-    if h3 is not None and ctx.cfg.refine_rounds:
-        o3, h3, _ = _refine(ctx, o3, h3)
-    keep = bool(h3 is not None and h3.max < h.max and _defects(o3) == 0 and _flaws(o3) <= _flaws(out))
-    details["peak_round"] = {"locked_vertices": int(lock.sum()), "hausdorff_max_before": float(h.max / ctx.scale),
-                             "hausdorff_max_after": None if h3 is None else float(h3.max / ctx.scale), "kept": keep}
-    return (o3, h3) if keep else (out, h)
+    tree = cKDTree(ctx.prep.V)
+    for _ in range(ctx.cfg.peak_rounds):
+        ab = h.a_to_b
+        if ab is None or len(ab.peak_points) == 0:
+            break
+        pts = ab.peak_points[ab.peak_dists >= _PEAK_SHARE * h.max][:_PEAK_LOCKS]
+        if len(pts) == 0:
+            break
+        _, nv = tree.query(pts)
+        if lock[nv].all():
+            break
+        lock[nv] = True
+        o3, h3 = whole(target, lock)
+        if h3 is not None and ctx.cfg.refine_rounds:
+            o3, h3, _ = _refine(ctx, o3, h3)
+        keep = bool(h3 is not None and h3.max < h.max and _defects(o3) == 0 and _flaws(o3) <= _flaws(out))
+        log.append({"locked_vertices": int(lock.sum()), "hausdorff_max_before": float(h.max / ctx.scale),
+                    "hausdorff_max_after": None if h3 is None else float(h3.max / ctx.scale), "kept": keep})
+        if not keep:
+            break
+        out, h = o3, h3
+    details["peak_rounds"] = log
+    return out, h
 
 
 def _reassign(le: repair.LocalError, V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> None:
@@ -1315,8 +1325,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             details["probes"] = probes
         if h is not None and cfg.refine_rounds:
             out, h, refine_log = _refine(ctx, out, h)
-            if "backed_off_from" not in details:
-                out, h = _peak_round(ctx, out, h, whole, target, details)
+            if "backed_off_from" not in details and cfg.peak_rounds > 0:
+                out, h = _peak_rounds(ctx, out, h, whole, target, details)
     else:
         target, out, h = _search_error(prep, method, value * scale, T0, whole, probes, scale)
         details["max_error_target"] = value

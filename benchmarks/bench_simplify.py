@@ -7,7 +7,7 @@ vertex order, with the stage's seconds next to the bare library call's, side by 
     .venv/bin/python benchmarks/bench_simplify.py --derive benchmarks/results/simplify.json
 
 Rows (``rows`` in the JSON; issue 19's table): model x ratio x ordering with the default stage
-(``method = "meshopt"``, ``fit_iterations = 3``, ``refine_rounds = 2``):
+(``method = "meshopt"``, ``fit_iterations = 3``, ``refine_rounds = 2``, ``peak_rounds = 1``):
 
 * ``reported_max`` -- the record's symmetric Hausdorff max (fraction of the bbox diagonal), and
   ``reference_max`` -- an independent measurement of the same two meshes

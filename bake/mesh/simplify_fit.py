@@ -28,7 +28,15 @@ __all__ = ["refit", "barycentric"]
 
 
 def barycentric(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates (n, 3) of points in (or projected onto) triangles ABC."""
+    """Barycentric coordinates (n, 3) of points in (or projected onto) triangles ABC, clipped
+    into the triangle."""
+    b = plane_barycentric(P, A, B, C)
+    return np.clip(b, 0.0, 1.0) / np.clip(b, 0.0, 1.0).sum(axis=1, keepdims=True).clip(1e-300)
+
+
+def plane_barycentric(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (n, 3) of points projected onto the planes of triangles ABC (not
+    clipped; a degenerate triangle gives its centre)."""
     v0, v1, v2 = B - A, C - A, P - A
     d00 = np.einsum("ij,ij->i", v0, v0)
     d01 = np.einsum("ij,ij->i", v0, v1)
@@ -40,8 +48,7 @@ def barycentric(P: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> n
     den = np.where(ok, den, 1.0)
     v = np.where(ok, (d11 * d20 - d01 * d21) / den, 1.0 / 3.0)
     w = np.where(ok, (d00 * d21 - d01 * d20) / den, 1.0 / 3.0)
-    b = np.stack([1.0 - v - w, v, w], axis=1)
-    return np.clip(b, 0.0, 1.0) / np.clip(b, 0.0, 1.0).sum(axis=1, keepdims=True).clip(1e-300)
+    return np.stack([1.0 - v - w, v, w], axis=1)
 
 
 def _normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:

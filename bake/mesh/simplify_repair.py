@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from .simplify_error import SurfaceIndex, _pair_dist2, _tri_table
+from .simplify_fit import plane_barycentric
 
 __all__ = ["border_chains", "border_locks", "LocalError", "flip_edges", "polish", "folds", "FOLD_DOT"]
 
@@ -268,30 +269,9 @@ class LocalError:
         return self.patches(V[F[tt]], rows, pts, prow, len(tris), sample=sample)
 
 
-def edge_neighbours(F: np.ndarray) -> np.ndarray:
-    """(t, 3) the triangle across each side (k, k+1) of each triangle (-1: open or shared by
-    more than two)."""
-    a = F.ravel()
-    b = F[:, [1, 2, 0]].ravel()
-    n = int(F.max()) + 1 if len(F) else 1
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    same = ks[1:] == ks[:-1]
-    two = same.copy()
-    two[1:] &= ~same[:-1]
-    two[:-1] &= ~same[1:]
-    i = np.flatnonzero(two)
-    nbr = np.full(len(a), -1, np.int64)
-    nbr[order[i]] = order[i + 1] // 3
-    nbr[order[i + 1]] = order[i] // 3
-    return nbr.reshape(-1, 3)
-
-
-# --------------------------------------------------------------------------- edge flips
-def _interior_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Edges shared by exactly two triangles running opposite ways: (t, u, side of t, side of u)
-    (side k = corners k, k+1)."""
+def _edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The half-edges (k, k+1) of every triangle as flat arrays ``a -> b`` (index 3t + k), and
+    the pairs ``(h1, h2)`` of half-edges on an edge shared by exactly two triangles."""
     a = F.ravel()
     b = F[:, [1, 2, 0]].ravel()
     n = int(F.max()) + 1 if len(F) else 1
@@ -304,7 +284,24 @@ def _interior_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     two[1:] &= ~same[:-1]
     two[:-1] &= ~same[1:]
     i = np.flatnonzero(two)
-    h1, h2 = order[i], order[i + 1]
+    return a, b, order[i], order[i + 1]
+
+
+def edge_neighbours(F: np.ndarray) -> np.ndarray:
+    """(t, 3) the triangle across each side (k, k+1) of each triangle (-1: open or shared by
+    more than two)."""
+    _a, _b, h1, h2 = _edge_pairs(F)
+    nbr = np.full(3 * len(F), -1, np.int64)
+    nbr[h1] = h2 // 3
+    nbr[h2] = h1 // 3
+    return nbr.reshape(-1, 3)
+
+
+# --------------------------------------------------------------------------- edge flips
+def _interior_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Edges shared by exactly two triangles running opposite ways: (t, u, side of t, side of u)
+    (side k = corners k, k+1)."""
+    a, b, h1, h2 = _edge_pairs(F)
     ok = a[h1] == b[h2]  # opposite directions (consistently oriented)
     h1, h2 = h1[ok], h2[ok]
     return h1 // 3, h2 // 3, h1 % 3, h2 % 3
@@ -606,19 +603,7 @@ def _position_in(rt: np.ndarray, rv: np.ndarray, tri: np.ndarray, row: np.ndarra
 
 
 def _barycentric(P: np.ndarray, C: np.ndarray) -> np.ndarray:
-    a, b, c = C[:, 0], C[:, 1], C[:, 2]
-    v0, v1, v2 = b - a, c - a, P - a
-    d00 = np.einsum("ij,ij->i", v0, v0)
-    d01 = np.einsum("ij,ij->i", v0, v1)
-    d11 = np.einsum("ij,ij->i", v1, v1)
-    d20 = np.einsum("ij,ij->i", v2, v0)
-    d21 = np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    ok = den > 0
-    den = np.where(ok, den, 1.0)
-    v = np.where(ok, (d11 * d20 - d01 * d21) / den, 1.0 / 3.0)
-    w = np.where(ok, (d00 * d21 - d01 * d20) / den, 1.0 / 3.0)
-    return np.stack([1.0 - v - w, v, w], axis=1)
+    return plane_barycentric(P, C[:, 0], C[:, 1], C[:, 2])
 
 
 # --------------------------------------------------------------------------- folds

@@ -73,18 +73,6 @@ REF_ROUNDS = 5
 
 
 # --------------------------------------------------------------------------- helpers
-def shuffled_obj(src: Path, dst: Path, seed: int) -> Path:
-    """The OBJ with its face lines in a seeded random order (everything else as it was)."""
-    lines = src.read_text().splitlines()
-    faces = [i for i, line in enumerate(lines) if line.startswith("f ")]
-    order = np.random.default_rng(seed).permutation(len(faces))
-    out = list(lines)
-    for slot, k in zip(faces, order):
-        out[slot] = lines[faces[k]]
-    dst.write_text("\n".join(out) + "\n")
-    return dst
-
-
 def variant(model: str, ordering: str, tmp: Path) -> tuple[Path, list[str] | None]:
     path = CORPUS / MODELS[model]
     if ordering == "given":
@@ -94,6 +82,8 @@ def variant(model: str, ordering: str, tmp: Path) -> tuple[Path, list[str] | Non
     if ordering.startswith("shuffle"):
         if path.suffix != ".obj":
             raise SystemExit(f"ordering {ordering}: {model} is not an OBJ")
+        from simplify_reference import shuffled_obj  # tests/mesh, the test's own shuffle
+
         return shuffled_obj(path, tmp / f"{model}-{ordering}.obj", int(ordering[7:])), None
     raise SystemExit(f"unknown ordering {ordering!r}")
 

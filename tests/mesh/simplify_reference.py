@@ -42,6 +42,18 @@ class Reference:
         return max(self.a_to_b.max, self.b_to_a.max)
 
 
+def shuffled_obj(src, dst, seed: int):
+    """The OBJ with its face lines in a seeded random order (everything else as it was)."""
+    lines = src.read_text().splitlines()
+    faces = [i for i, line in enumerate(lines) if line.startswith("f ")]
+    order = np.random.default_rng(seed).permutation(len(faces))
+    out = list(lines)
+    for slot, k in zip(faces, order):
+        out[slot] = lines[faces[k]]
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
 def _meshlab_distances(Vx, Fx, Vy, Fy, samples: int, vert_only: bool = False):
     """MeshLab's sampled distances from X to Y: (sample positions, distances, mean)."""
     import pymeshlab

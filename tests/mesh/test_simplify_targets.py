@@ -12,7 +12,6 @@ lucky.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from bake import pipeline
@@ -20,19 +19,7 @@ from bake.config import SimplifyConfig
 from bake.mesh import simplify as S
 
 from conftest import corpus_path
-from simplify_reference import hausdorff_reference
-
-
-def shuffled_obj(src, dst, seed: int):
-    """The OBJ with its face lines in a seeded random order (everything else as it was)."""
-    lines = src.read_text().splitlines()
-    faces = [i for i, line in enumerate(lines) if line.startswith("f ")]
-    order = np.random.default_rng(seed).permutation(len(faces))
-    out = list(lines)
-    for slot, k in zip(faces, order):
-        out[slot] = lines[faces[k]]
-    dst.write_text("\n".join(out) + "\n")
-    return dst
+from simplify_reference import hausdorff_reference, shuffled_obj
 
 
 def variants(tmp_path):

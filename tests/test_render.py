@@ -201,7 +201,7 @@ def test_the_reader_sprites_camera_model_gives_the_same_pixels():
         sy_ = 180.0 - rel @ u / (rel @ f) * rc.focal
         np.testing.assert_allclose(sx - 240.0, px, atol=1e-6)
         np.testing.assert_allclose(180.0 - sy_, py, atol=1e-6)
-        np.testing.assert_allclose(rel @ f, pz, rtol=1e-9)
+        np.testing.assert_allclose(rel @ f, pz * cam.focal, rtol=1e-9)  # pz: depth / focal
         # one small triangle around each point: seen at the point's pixel
         tri = world[:, None, :] + np.array([[-0.05, -0.05, 0], [0.0, 0.07, 0], [0.05, -0.05, 0]]) @ \
             np.stack([r, u, f])

@@ -419,7 +419,7 @@ def _literal(v: Any) -> str:
 
 
 _PROC_ARG = re.compile(r"%[sb]")
-BLOCK_ID_LENGTH = 4
+BLOCK_ID_LENGTH = 3
 
 
 @dataclass
@@ -464,6 +464,7 @@ class Builder:
     # ---- compiling
     def build(self) -> dict[str, dict[str, Any]]:
         self._blocks: dict[str, dict[str, Any]] = {}
+        self._leaves: set[str] = set()  # reporters and shadows: never followed by a next block
         self._n = 0
         # block ids must not collide with the target's variable/list ids either
         self._reserved = set(self.scope.variables.values()) | set(self.scope.lists.values())
@@ -484,13 +485,13 @@ class Builder:
             blk["x"] = 0
             blk["y"] = y
             y += 120 + 48 * n_body
-        for blk in self._blocks.values():
-            _compact(blk)
+        for bid, blk in self._blocks.items():
+            _compact(blk, leaf=bid in self._leaves)
         return self._blocks
 
     def _id(self) -> str:
-        # 4 characters (Scratch's own are 20): ids appear 2-4 times per block in project.json;
-        # unique within the target (checked), which is all Scratch needs
+        # 3 characters (Scratch's own are 20; 86^3 = 636,056 of them): ids appear 2-4 times per
+        # block in project.json; unique within the target (checked), which is all Scratch needs
         self._n += 1
         bid = stable_id(self.scope.target, "block", str(self._n), length=BLOCK_ID_LENGTH)
         salt = 0
@@ -503,6 +504,8 @@ class Builder:
         bid = self._id()
         self._blocks[bid] = {"opcode": opcode, "next": None, "parent": parent, "inputs": {}, "fields": {},
                              "shadow": shadow, "topLevel": False}
+        if shadow:
+            self._leaves.add(bid)
         return bid
 
     def _define_block(self, proc: _Proc, body: Stack) -> str:
@@ -549,6 +552,8 @@ class Builder:
         if isinstance(node, Call):
             return self._compile_call(node, parent)
         bid = self._new(node.opcode, parent)
+        if node.shape != "stack":
+            self._leaves.add(bid)
         blk = self._blocks[bid]
         for name, (value, kind) in node.inputs.items():
             compiled = self._input(value, kind, bid)
@@ -630,13 +635,19 @@ class Builder:
         return self._compile(value, parent)
 
 
-def _compact(blk: dict[str, Any]) -> None:
+def _compact(blk: dict[str, Any], *, leaf: bool = False) -> None:
     """Leave out the members whose absence means the same to the loaders: ``shadow`` and
-    ``topLevel`` when false, ``inputs`` and ``fields`` when empty. scratch-parser's schema requires
-    only ``opcode``; scratch-vm's and TurboWarp's deserializer (sb3.js ``deserializeBlocks``) turn
-    missing inputs/fields into ``{}`` and test ``shadow``/``topLevel`` for truth only (the TurboWarp
-    packager itself drops false ``shadow``/``topLevel``). ``next`` and ``parent`` stay, ``null``
-    included: the VM compares them with ``null`` (``getTopLevelScript``)."""
+    ``topLevel`` when false, ``inputs`` and ``fields`` when empty, and ``next: null`` of a
+    ``leaf`` (a reporter, boolean or shadow block: nothing ever follows one). scratch-parser's
+    schema requires only ``opcode``; scratch-vm's and TurboWarp's deserializer (sb3.js
+    ``deserializeBlocks``) turn missing inputs/fields into ``{}`` and test ``shadow``/``topLevel``
+    for truth only (the TurboWarp packager itself drops false ``shadow``/``topLevel``); ``next`` is
+    read only when a stack is walked (``getNextBlock``, the compiler's ``walkStack``, ``blockToXML``
+    tests it for truth), which never reaches a reporter. ``parent`` stays, ``null`` included: the
+    VM compares it with ``null`` (``getTopLevelScript``), and so does ``next`` of a stack block
+    (``deleteBlock``)."""
+    if leaf and blk.get("next", 0) is None:
+        del blk["next"]
     for key in ("shadow", "topLevel"):
         if blk.get(key) is False:
             del blk[key]

@@ -18,7 +18,8 @@ custom block                                what it does                        
                                             ``cam z``, ``cam yaw``, ``cam pitch``
                                             (degrees), ``focal``, ``near``
 ``project vertices``                        every vertex into the lists ``_px    :func:`project`,
-                                            _py _pz`` (screen x, y, depth);      :func:`safe_frame`
+                                            _py _pz`` (screen x, y, depth over   :func:`safe_frame`
+                                            focal);
                                             ``_safe`` = 1 when the whole model is
                                             in front of ``near`` and where the
                                             pen can draw
@@ -46,8 +47,9 @@ the frame is x right, y up, z into the screen; the camera at ``(cx, cy, cz)`` tu
 degrees about y (positive turns right) and then ``pitch`` degrees about its x axis (positive looks
 up). With ``d = p - c``: ``x' = dx*cos(yaw) - dz*sin(yaw)``, ``z' = dx*sin(yaw) + dz*cos(yaw)``,
 ``y'' = dy*cos(pitch) - z'*sin(pitch)``, ``z'' = dy*sin(pitch) + z'*cos(pitch)``; the stage
-position is ``((dx*(focal*cos(yaw)) - dz*(focal*sin(yaw))) / z'', (dy*(focal*cos(pitch)) -
-z'*(focal*sin(pitch))) / z'')``. Scratch's ``sin``/``cos`` take degrees
+position is ``focal * (x', y'') / z''``, computed as ``((dx*cos(yaw) - dz*sin(yaw)) / w,
+(dy*cos(pitch) - z'*sin(pitch)) / w)`` with ``w = z'' / focal = dy*(sin(pitch)/focal) +
+z'*(cos(pitch)/focal)`` (``_pz`` keeps ``w``). Scratch's ``sin``/``cos`` take degrees
 and round to 10 decimals; the reference does the same. ``bake.render.Camera.yaw_pitch`` is the
 same camera for the numpy rasterizer (report.html's "green flag" preview).
 
@@ -86,8 +88,9 @@ __all__ = ["MeshNames", "BVHSpec", "BSPSpec", "Camera", "ReaderSpec", "ReaderBui
            "project", "scratch_sin", "scratch_cos", "bounding_sphere", "safe_frame", "drawn", "BIG"]
 
 #: characters of the reader's own variable and list ids (Scratch's are 20; ours appear in every
-#: variable block, so short ids keep the sprite small; derived from the names, never random)
-VAR_ID_LENGTH = 6
+#: variable block, so short ids keep the sprite small; derived from the names, never random, and
+#: unique within the sprite: :func:`bake.scratch.sb3.data_ids`)
+VAR_ID_LENGTH = 4
 
 
 # --------------------------------------------------------------------------- specs
@@ -189,7 +192,8 @@ def _sc(deg: float) -> tuple[float, float]:
 
 
 def project(verts: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Screen x, y and depth of ``(N, 3)`` vertices, with exactly the reader's arithmetic."""
+    """Screen x, y and depth over focal (``_pz``: depth / ``focal``) of ``(N, 3)`` vertices, with
+    exactly the reader's arithmetic."""
     sy_, cy_ = _sc(cam.yaw)
     sp_, cp_ = _sc(cam.pitch)
     v = np.asarray(verts, np.float64).reshape(-1, 3)
@@ -198,11 +202,11 @@ def project(verts: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.
     dz = v[:, 2] - cam.z
     f = float(cam.focal)
     z1 = dx * sy_ + dz * cy_
-    z2 = dy * sp_ + z1 * cp_
+    w = dy * (sp_ / f) + z1 * (cp_ / f)  # depth / focal: the screen's scale is in the divisor
     with np.errstate(divide="ignore", invalid="ignore"):
-        px = (dx * (f * cy_) - dz * (f * sy_)) / z2
-        py = (dy * (f * cp_) - z1 * (f * sp_)) / z2
-    return px, py, z2
+        px = (dx * cy_ - dz * sy_) / w
+        py = (dy * cp_ - z1 * sp_) / w
+    return px, py, w
 
 
 #: how far from the stage centre the pen may go: Scratch keeps a sprite's costume bounds on the
@@ -226,9 +230,10 @@ def bounding_sphere(verts: Sequence[float] | np.ndarray) -> tuple[tuple[float, f
     return (float(c[0]), float(c[1]), float(c[2])), rad
 
 
-def usable(px, py, pz, near: float) -> np.ndarray:
-    """Per vertex: in front of ``near`` and where the pen can go (the reader's test)."""
-    return (pz > near) & (np.abs(px) < SAFE_X) & (np.abs(py) < SAFE_Y)
+def usable(px, py, pz, near: float, focal: float) -> np.ndarray:
+    """Per vertex (``pz``: depth / focal, as :func:`project` gives it): in front of ``near`` and
+    where the pen can go (the reader's test)."""
+    return (pz > near / focal) & (np.abs(px) < SAFE_X) & (np.abs(py) < SAFE_Y)
 
 
 def safe_frame(cam: Camera, bounds: tuple[tuple[float, float, float], float] | None) -> bool:
@@ -254,7 +259,7 @@ def drawn(verts, tris, cam: Camera, two_sided: Sequence[int] = ()) -> np.ndarray
     two = np.asarray(list(two_sided) + [0], np.int64)[np.clip(t[:, 3] - 1, 0, max(len(two_sided), 0))] == 1 \
         if len(two_sided) else np.zeros(len(t), bool)
     a = np.where(two, -np.abs(a), a)
-    ok = usable(px, py, pz, cam.near)
+    ok = usable(px, py, pz, cam.near, cam.focal)
     return (a < 0) & ok[i].all(1)
 
 
@@ -360,8 +365,9 @@ def _camera_blocks(r: ReaderBuilder) -> None:
     near = r.v("near")
     nverts = div(B.list_length(m.verts), 3)
 
-    def unusable(v):  # vertex v behind near, or farther from the centre than the pen may go
-        return not_(and_(gt(item(v, pz), near), and_(lt(B.abs_(item(v, px)), SAFE_X), lt(B.abs_(item(v, py)), SAFE_Y))))
+    def usable(v):  # vertex v in front of near, and no farther from the centre than the pen may go
+        return and_(gt(item(v, pz), div(near, var("focal"))),
+                    and_(lt(B.abs_(item(v, px)), SAFE_X), lt(B.abs_(item(v, py)), SAFE_Y)))
 
     # the safe-frame test: the model's bounding sphere (centre, radius: spec.bounds) is in front of
     # near and its picture within SAFE_X of the centre; in an unsafe frame, which vertices are
@@ -378,15 +384,14 @@ def _camera_blocks(r: ReaderBuilder) -> None:
         B.delete_all(bad),
         B.if_(eq(var("_safe"), 0), [
             r.set("_i", 1),
-            B.repeat(nverts, [B.if_(unusable(i), [B.add_to(bad, 1)], [B.add_to(bad, 0)]), r.change("_i", 1)]),
+            B.repeat(nverts, [B.if_(usable(i), [B.add_to(bad, 0)], [B.add_to(bad, 1)]), r.change("_i", 1)]),
         ]),
     ]
     r.define("project vertices", [], [
         r.set("_syaw", B.mathop("sin", var("cam yaw"))), r.set("_cyaw", B.mathop("cos", var("cam yaw"))),
         r.set("_spitch", B.mathop("sin", var("cam pitch"))), r.set("_cpitch", B.mathop("cos", var("cam pitch"))),
-        # the screen's scale folded into the turn: focal * cos, focal * sin
-        r.set("_fcy", mul(var("focal"), cyw)), r.set("_fsy", mul(var("focal"), syw)),
-        r.set("_fcp", mul(var("focal"), cpt)), r.set("_fsp", mul(var("focal"), spt)),
+        # the screen's scale folded into the depth: w = depth / focal, from sin / focal, cos / focal
+        r.set("_spf", div(spt, var("focal"))), r.set("_cpf", div(cpt, var("focal"))),
         B.delete_all(px), B.delete_all(py), B.delete_all(pz),
         r.set("_i", 1),
         B.repeat(nverts, [
@@ -394,10 +399,10 @@ def _camera_blocks(r: ReaderBuilder) -> None:
             r.set("_dy", sub(item(add(i, 1), m.verts), var("cam y"))),
             r.set("_dz", sub(item(add(i, 2), m.verts), var("cam z"))),
             r.set("_z1", add(mul(dx, syw), mul(dz, cyw))),
-            r.set("_z2", add(mul(dy, spt), mul(z1, cpt))),
+            r.set("_z2", add(mul(dy, var("_spf")), mul(z1, var("_cpf")))),
             B.add_to(pz, z2),
-            B.add_to(px, div(sub(mul(dx, var("_fcy")), mul(dz, var("_fsy"))), z2)),
-            B.add_to(py, div(sub(mul(dy, var("_fcp")), mul(z1, var("_fsp"))), z2)),
+            B.add_to(px, div(sub(mul(dx, cyw), mul(dz, syw)), z2)),
+            B.add_to(py, div(sub(mul(dy, cpt), mul(z1, spt)), z2)),
             r.change("_i", 3),
         ]),
         *safe,
@@ -478,7 +483,8 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     ``(first, n)`` pairs in ``draw ranges`` (back to front). The walk of docs/formats-bsp.md with
     an explicit stack (a 0 at the bottom ends it; a record's item number to visit, or the negated
     item of a ready-made range), with the arithmetic of its Python model
-    ``bake.bsp.traverse.draw_ranges``: the plane test is ``((a*x + b*y) + c*z) - d >= 0``."""
+    ``bake.bsp.traverse.draw_ranges``: the eye is in front when ``((a*x + b*y) + c*z) - d >= 0``,
+    tested as ``not (((a*x + b*y) + c*z) < d)`` (the same for every pair of doubles)."""
     s = r.spec.bsp
     nodes, planes = r.lst(s.nodes), r.lst(s.planes)
     ranges, stack = r.lst("draw ranges"), r.lst("_bsp stack")
@@ -492,33 +498,38 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     def plane(k):  # item (T - k) of planes
         return item(sub(T, k), planes)
 
-    front = not_(lt(sub(add(add(mul(plane(3), var("cam x")), mul(plane(2), var("cam y"))),
-                            mul(plane(1), var("cam z"))), item(T, planes)), 0))
+    # the eye is behind the plane when ((a*x + b*y) + c*z) < d, which is exactly the Python
+    # model's ((a*x + b*y) + c*z) - d < 0 (a difference of doubles is 0 only when they are equal)
+    behind = lt(add(add(mul(plane(3), var("cam x")), mul(plane(2), var("cam y"))), mul(plane(1), var("cam z"))),
+                item(T, planes))
+
+    def pop():  # the next record or range to visit: the top of the stack
+        return [r.set("_r", item("last", stack)), B.delete_item(stack, "last")]
+
+    def emit(first, n):  # a range into draw ranges
+        return [B.add_to(ranges, item(first, nodes)), B.add_to(ranges, item(n, nodes))]
+
     split = [
         r.set("_B", at(1)),
         B.if_(lt(bb, 0), [r.set("_front", 0), r.set("_B", sub(0, bb))], [r.set("_front", add(rr, 6))]),
-        B.if_(front, [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 2))],
-              [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 4))]),
-        B.if_(gt(nr, 0), [B.add_to(stack, nr)]),
-        B.if_(gt(item(add(g, 1), nodes), 0), [B.add_to(stack, sub(0, g))]),
-        r.set("_g", 0),
+        B.if_(behind, [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 4))],
+              [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 2))]),
+        B.if_(gt(nr, 0), [B.add_to(stack, nr)]),  # the near side is drawn last
+        B.if_(gt(item(add(g, 1), nodes), 0), [B.add_to(stack, sub(0, g))]),  # then the coplanar range
+        B.if_(gt(nx, 0), [r.set("_r", nx)], pop()),  # the far side first, at once
     ]
     r.define("bsp walk", [], [
         B.delete_all(ranges), B.delete_all(stack), B.add_to(stack, 0),
         r.set("_r", 0),
         B.if_(gt(B.list_length(nodes), 0), [r.set("_r", 1)]),
         B.repeat_until(eq(rr, 0), [
-            r.set("_g", sub(0, rr)),  # r < 0: the range at item -r
-            r.set("_next", 0),
             B.if_(gt(rr, 0), [
                 r.set("_T", item(rr, nodes)),
                 B.if_(lt(T, 2), [  # a leaf or a peel: its (first) range now
-                    r.set("_g", add(rr, 1)),
-                    B.if_(eq(T, 1), [B.add_to(stack, sub(0, add(rr, 3))), r.set("_next", add(rr, 5))]),
+                    *emit(add(rr, 1), add(rr, 2)),
+                    B.if_(eq(T, 1), [B.add_to(stack, sub(0, add(rr, 3))), r.set("_r", add(rr, 5))], pop()),
                 ], split),
-            ]),
-            B.if_(gt(g, 0), [B.add_to(ranges, item(g, nodes)), B.add_to(ranges, item(add(g, 1), nodes))]),
-            B.if_(gt(nx, 0), [r.set("_r", nx)], [r.set("_r", item("last", stack)), B.delete_item(stack, "last")]),
+            ], [*emit(sub(0, rr), sub(1, rr)), *pop()]),  # r < 0: the ready-made range at item -r
         ]),
     ])
 
@@ -564,9 +575,8 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         if k in all_local:
             raise B.BlockError(f"list {k!r} is used by the reader itself")
         all_local[k] = v
-    scope = B.Scope(name, variables={n: sb3.stable_id(name, "var", n, length=VAR_ID_LENGTH) for n in r.vars},
-                    lists={n: sb3.stable_id(name, "list", n, length=VAR_ID_LENGTH) for n in all_local},
-                    stage_lists=stage_ids)
+    var_ids, list_ids = sb3.data_ids(name, list(r.vars), list(all_local), length=VAR_ID_LENGTH)
+    scope = B.Scope(name, variables=var_ids, lists=list_ids, stage_lists=stage_ids)
     b = B.Builder(scope)
     for proccode, args, body in r.procs:
         b.define(proccode, args, body)

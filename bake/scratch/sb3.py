@@ -31,7 +31,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import Any, Sequence
 
 from ..errors import InputError
 from .limits import ASSET_LIMIT, PROJECT_JSON_LIMIT
@@ -62,6 +62,25 @@ def stable_id(*parts: str, length: int = 20) -> str:
         n, r = divmod(n, len(ID_ALPHABET))
         out.append(ID_ALPHABET[r])
     return "".join(out)
+
+
+def data_ids(target: str, variables: Sequence[str], lists: Sequence[str], *, length: int = 20
+             ) -> tuple[dict[str, str], dict[str, str]]:
+    """The ids of a target's variables and lists, derived from the names (:func:`stable_id`) and
+    unique within the target: Scratch keeps variables and lists in one table keyed by id, so a
+    short id that collides with one already given is derived again with a salt."""
+    taken: set[str] = set()
+
+    def one(kind: str, name: str) -> str:
+        vid, salt = stable_id(target, kind, name, length=length), 0
+        while vid in taken:
+            salt += 1
+            vid = stable_id(target, kind, name, str(salt), length=length)
+        taken.add(vid)
+        return vid
+
+    var_ids = {n: one("var", n) for n in variables}
+    return var_ids, {n: one("list", n) for n in lists}
 
 
 @dataclass(frozen=True)
@@ -108,11 +127,11 @@ class Target:
         costumes = self.costumes or [Costume("backdrop1" if self.is_stage else "costume1",
                                              Asset(BACKDROP_SVG if self.is_stage else SPRITE_SVG, "svg"),
                                              1, (240.0, 180.0) if self.is_stage else (1.0, 1.0))]
+        var_ids, list_ids = data_ids(self.name, list(self.variables), list(self.lists), length=self.id_length)
         t: dict[str, Any] = {
             "isStage": self.is_stage, "name": self.name,
-            "variables": {stable_id(self.name, "var", k, length=self.id_length): [k, v]
-                          for k, v in self.variables.items()},
-            "lists": {stable_id(self.name, "list", k, length=self.id_length): [k, v] for k, v in self.lists.items()},
+            "variables": {var_ids[k]: [k, v] for k, v in self.variables.items()},
+            "lists": {list_ids[k]: [k, v] for k, v in self.lists.items()},
             "broadcasts": {}, "blocks": self.blocks, "comments": {},
             "currentCostume": self.current_costume, "costumes": [c.to_json() for c in costumes], "sounds": [],
             "volume": 100, "layerOrder": self.layer_order,

@@ -160,7 +160,8 @@ def _painter(px, py, pz, tris, order, near, cull, xs, ys, margin=1.5):
 
 def check_render(strokes, px, py, pz, tris, order, colours, near, cull, min_sure=2000):
     """The pen strokes, rasterised, show at every unambiguous sample the colour of the triangle
-    the Python painter's rasterisation shows there, and nothing where no triangle is."""
+    the Python painter's rasterisation shows there, and nothing where no triangle is. ``pz`` and
+    ``near`` in the same unit (``readers.project`` gives depth / focal: pass near / focal)."""
     assert strokes, "nothing drawn"
     owner = _raster_strokes(strokes, XS, YS)
     seen, amb = _painter(px, py, pz, tris, order, near, cull, XS, YS)

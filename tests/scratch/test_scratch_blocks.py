@@ -30,18 +30,24 @@ def _check_links(blocks):
     for bid, b in blocks.items():
         if isinstance(b, list):
             continue
-        assert set(b) >= {"opcode", "next", "parent"}
+        assert set(b) >= {"opcode", "parent"}
         # written only when they say something (blocks._compact)
         assert b.get("shadow", True) is True and b.get("topLevel", True) is True
         assert b.get("inputs", 1) != {} and b.get("fields", 1) != {}
-        b = {"inputs": {}, "fields": {}, "shadow": False, "topLevel": False, **b}
+        leaf = "next" not in b  # a reporter or shadow: nothing follows it, nor is it in a stack
+        b = {"inputs": {}, "fields": {}, "shadow": False, "topLevel": False, "next": None, **b}
+        if leaf:
+            p = blocks[b["parent"]]
+            assert p.get("next") != bid and not any(
+                isinstance(v, list) and v[0] == 2 and v[1] == bid and k.startswith("SUBSTACK")
+                for k, v in p.get("inputs", {}).items()), f"{b['opcode']} is in a stack but has no next"
         if b["next"] is not None:
             assert blocks[b["next"]]["parent"] == bid
         if b["parent"] is None:
             assert b["topLevel"] and "x" in b and "y" in b
         else:
             p = blocks[b["parent"]]
-            assert p["next"] == bid or any(isinstance(v, list) and bid in v[1:] for v in p.get("inputs", {}).values()), \
+            assert p.get("next") == bid or any(isinstance(v, list) and bid in v[1:] for v in p.get("inputs", {}).values()), \
                 f"{b['opcode']} is not linked from its parent {p['opcode']}"
         for name, inp in b["inputs"].items():
             assert inp[0] in (1, 2, 3)

@@ -136,5 +136,5 @@ def test_renderer_in_bsp_order_draws_the_painters_picture(walks):
         px, py, pz = readers.project(verts, cam)
         # (a few thousand samples at least: split triangles are small, and samples near a later
         # triangle's edge are left out as ambiguous)
-        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, False, min_sure=1500)
+        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near / cam.focal, False, min_sure=1500)
     assert safes[0] == 1 and safes[-1] == 0  # both paths ran

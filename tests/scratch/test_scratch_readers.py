@@ -207,7 +207,7 @@ def test_renderer_draws_the_painters_picture(baked):
         shown = readers.drawn(verts, lists["tris"], cam)
         assert 0 < shown.sum() < len(tris)  # back faces culled on the stage
         order = [t for t in range(1, len(tris) + 1) if shown[t - 1]]  # no BSP: list order
-        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near, False)
+        check_render(run["pen"], px, py, pz, tris, order, colours, cam.near / cam.focal, False)
 
 
 def test_demo_script_and_reader_without_bvh(baked):

@@ -251,3 +251,44 @@ def test_stages_a_sweep_times_reuse_no_tree(lit, tmp_path):
     res = pipeline.run(cfg, cache=cache_mod.StageCache(store))
     bsp = next(r for r in res.records if r.name == "bsp")
     assert bsp.details["tree_reused"]["reused"] is True
+
+
+# --------------------------------------------------------------------------- the lighting trace
+def _stage(rep: dict, name: str) -> dict:
+    return next(s for s in rep["stages"] if s["name"] == name)
+
+
+@pytest.mark.parametrize("change,reused", [
+    ("lighting.exposure=0.4", True), ("lighting.tonemap=\"reinhard\"", True),
+    ("lighting.lights[0].direction=[0.2, -1.0, 0.5]", False), ("lighting.ao.samples=12", False)],
+    ids=["exposure", "tonemap", "sun-direction", "ao-samples"])
+def test_a_colour_key_change_reuses_the_trace_and_gives_the_cold_bytes(lit, tmp_path, change, reused):
+    root, cfg_path, _, _ = lit
+    out = tmp_path / "warm"
+    bake(cfg_path, out)
+    rep = bake(cfg_path, out, change)
+    light = _stage(rep, "lighting")
+    assert light["details"]["trace_reused"]["reused"] is reused
+    assert ("lighting" in rep["cache"]["memos_reused"]) is reused
+    cold = bake(cfg_path, tmp_path / "cold", change, "cache.dir=\"none\"")
+    assert outputs(out) == outputs(tmp_path / "cold")
+    c = _stage(cold, "lighting")
+    assert light["accuracy"] == c["accuracy"] and light["warnings"] == c["warnings"]
+    assert light["details"]["color_pipeline"] == c["details"]["color_pipeline"]
+    def figures(effects):  # (times aside)
+        return [{k: v for k, v in e.items() if k not in ("seconds", "timing")} for e in effects]
+
+    assert figures(light["effects"]) == figures(c["effects"])
+    if not reused:  # the key that needs new rays traced them: the figure is not the cheap one
+        assert light["details"]["rays"] > 0 and light["details"]["trace_reused"]["traced_seconds"] > 0
+
+
+def test_a_trace_with_subdivision_is_not_reused(lit, tmp_path):
+    """Subdivision compares shown colours (exposure, tone map), so its trace depends on them."""
+    root, cfg_path, _, _ = lit
+    out = tmp_path / "o"
+    bake(cfg_path, out, "lighting.subdivide=true")
+    rep = bake(cfg_path, out, "lighting.subdivide=true", "lighting.exposure=0.4")
+    assert _stage(rep, "lighting")["details"]["trace_reused"]["reused"] is False
+    bake(cfg_path, tmp_path / "cold", "lighting.subdivide=true", "lighting.exposure=0.4", "cache.dir=\"none\"")
+    assert outputs(out) == outputs(tmp_path / "cold")

@@ -303,7 +303,7 @@ def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light:
     key = geo = None
     if memo is not None:
         key = memo.key("preview", "preview geometry 1", cam, mesh.verts, mesh.tris, mesh.material, mesh.two_sided,
-                       mesh.bsp_nodes, mesh.bsp_planes, float(tie))
+                       _numbers(mesh.bsp_nodes), _numbers(mesh.bsp_planes), float(tie))
         raw = memo.get("preview", key)
         if raw is not None:
             geo = _unpack_geometry(raw, cam)
@@ -326,6 +326,17 @@ def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light:
     diff, stats = _difference(geo["painter"], geo["zbuffer"], geo["tie"], geo["edge"], pimg, zimg)
     stats.update({"order": geo["order"], "drawn": geo["drawn"], "colours": mesh.colour_source})
     return View(name, cam, pimg, zimg, diff, stats), pim
+
+
+def _numbers(items: list | None) -> np.ndarray | None:
+    """A list of numbers as one float64 array (exact for the lists' integers and doubles), for a
+    key: hashing it is one blob, not an object per item."""
+    if items is None:
+        return None
+    try:
+        return np.asarray(items, np.float64) if all(type(x) in (int, float) for x in items) else items
+    except (TypeError, ValueError):
+        return items
 
 
 def _pack_geometry(geo: dict) -> dict:

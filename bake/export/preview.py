@@ -334,7 +334,7 @@ def _numbers(items: list | None) -> np.ndarray | None:
     if items is None:
         return None
     try:
-        return np.asarray(items, np.float64) if all(type(x) in (int, float) for x in items) else items
+        return np.asarray(items, np.float64)  # (a numeric string stands for its number, as in the walk)
     except (TypeError, ValueError):
         return items
 

@@ -36,6 +36,11 @@ also write the outputs. Encoding is deterministic (dicts in insertion order, set
 Stores: a folder (``<out>/.bake-cache/stages`` by default, ``cache.dir`` to share one, ``"none"``
 for none) with a size cap (``cache.max_mb``): past it the least recently used entries are deleted
 (a hit touches its entry); or memory (what ``bake sweep`` uses when the folder cache is off).
+
+**Memos** (:class:`Memo`, in the same store and format): parts of a stage's work keyed by less than
+the stage's key, reused when the stage must run again -- the lighting trace (not the exposure or
+tone map), the BSP tree (not the colours), the previews' geometry. The stage names what the part
+depends on; the bake gets the same bytes as a cold one.
 """
 
 from __future__ import annotations

@@ -36,10 +36,17 @@ also write the outputs. Encoding is deterministic (dicts in insertion order, set
 Stores: a folder (``<out>/.bake-cache/stages`` by default, ``cache.dir`` to share one, ``"none"``
 for none) with a size cap (``cache.max_mb``): past it the least recently used entries are deleted
 (a hit touches its entry); or memory (what ``bake sweep`` uses when the folder cache is off).
+
+**Memos** (:class:`Memo`, in the same store and format): parts of a stage's work keyed by less than
+the stage's key, reused when the stage must run again -- the lighting trace (not the exposure or
+tone map), the BSP tree (not the colours), the previews' geometry. The stage names what the part
+depends on; the bake gets the same bytes as a cold one.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import functools
 import hashlib
@@ -817,3 +824,90 @@ def _check_payload(payload: dict, names: list[str]) -> None:
         scene.validate()
     except AssertionError as e:
         raise CacheError(f"holds an inconsistent scene ({e or 'validate failed'})") from None
+
+
+# --------------------------------------------------------------------------- memos
+def content_digest(*parts: Any) -> str:
+    """SHA-256 of values the entry format can store (arrays by dtype, shape, layout and bytes;
+    floats exactly): equal digests, equal values."""
+    e = _Encoder()
+    tree = e.enc(list(parts))
+    h = hashlib.sha256(json.dumps(tree, separators=(",", ":"), ensure_ascii=False).encode("utf-8"))
+    for b in e.blobs:
+        h.update(len(b).to_bytes(8, "little"))
+        h.update(b)
+    return h.hexdigest()
+
+
+class Memo:
+    """Results that a stage (or the report) can reuse when the stage must run again but part of its
+    work depends on less than the stage's key: the BSP tree, which depends on the geometry and the
+    merge groups and not on the lit colours (bake/bsp/stage.py); the previews' renders, which
+    depend on the written geometry, the draw order and the camera and not on the colours
+    (bake/export/preview.py). The caller names everything the result depends on
+    (:meth:`key`: the cache format, the tool fingerprint, a kind and those values' digest). Memos
+    are entries of the stage cache's store (same format, checks, size cap and LRU); a damaged one
+    is dropped with a warning and recomputed."""
+
+    def __init__(self, store: Any):
+        self.store = store
+        self.warnings: list[str] = []
+        self.reused: list[str] = []
+        self.stored: list[str] = []
+
+    def key(self, kind: str, *parts: Any) -> str:
+        return _h("memo", FORMAT, tool_fingerprint(), kind, content_digest(*parts))
+
+    def _where(self, name: str) -> str:
+        root = getattr(self.store, "root", None)
+        return str(root / name) if root is not None else name
+
+    def get(self, kind: str, key: str) -> Any:
+        name = key + ENTRY_SUFFIX
+        try:
+            buf = self.store.read(name)
+            if buf is None:
+                return None
+            out = decode_entry(buf, key, "memo " + kind)
+        except (CacheError, OSError, ValueError, TypeError, AttributeError) as e:
+            self.forget(kind, key, str(e))
+            return None
+        self.reused.append(kind)
+        return out
+
+    def forget(self, kind: str, key: str, why: str) -> None:
+        name = key + ENTRY_SUFFIX
+        self.warnings.append(f"stage cache: the {kind} memo {self._where(name)} {why}; ignored, computed again")
+        self.store.remove(name)
+
+    def put(self, kind: str, key: str, payload: Any) -> None:
+        try:
+            self.store.write(key + ENTRY_SUFFIX, encode_entry(key, "memo " + kind, payload))
+            self.stored.append(kind)
+        except (Unsupported, RecursionError) as e:
+            self.warnings.append(f"stage cache: the {kind} memo holds {e}; not cached")
+        except OSError as e:
+            self.warnings.append(f"stage cache: cannot write to {self.store.describe()} ({e.strerror or e}); "
+                                 "not cached")
+
+    def take_warnings(self) -> list[str]:
+        out, self.warnings = self.warnings, []
+        return out
+
+
+_ACTIVE_MEMO: "contextvars.ContextVar[Memo | None]" = contextvars.ContextVar("bake_memo", default=None)
+
+
+def active_memo() -> Memo | None:
+    """The memo store of the stage that is running (None: no cache, or a stage whose time a sweep
+    measures)."""
+    return _ACTIVE_MEMO.get()
+
+
+@contextlib.contextmanager
+def using_memo(memo: Memo | None):
+    token = _ACTIVE_MEMO.set(memo)
+    try:
+        yield memo
+    finally:
+        _ACTIVE_MEMO.reset(token)

@@ -119,6 +119,8 @@ class BakeResult:
     cache: dict[str, Any] | None = None
     # entries waiting for the outputs to be written (a first bake into a new folder): finish_cache
     cache_session: Any = None
+    # the stage cache's memos (bake.cache.Memo: the BSP tree, the previews' renders), None without a cache
+    memo: Any = None
 
 
 def finish_cache(result: BakeResult) -> None:
@@ -165,6 +167,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     scene = scene if scene is not None else Scene()
     limit = next((i for i, spec in enumerate(active) if spec.name in recompute), len(active))
     session = cache.session() if cache is not None else None
+    memo = cache_mod.Memo(cache.store) if cache is not None else None
     sections = [spec.section(cfg) for spec in active]
     info: dict[str, Any] | None = None
     start, prev_key, covered = 0, None, frozenset()
@@ -201,7 +204,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         counts_in = counts(scene)
         t = time.perf_counter()
         try:
-            scene, rec = fn(scene, sections[i])
+            with cache_mod.using_memo(memo if i < limit else None):  # (a timed sweep stage reuses nothing)
+                scene, rec = fn(scene, sections[i])
         except ConfigError as e:
             raise _in_config_file(e, cfg) from None
         except BakeError:
@@ -241,8 +245,10 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         else:
             info["dropped"] = len(session.finish())
         info["stored"] = list(session.stored)
+        info["memos_reused"] = list(memo.reused)
     return BakeResult(scene=scene, records=records, skipped=skipped,
-                      seconds=time.perf_counter() - t0, config=cfg, cache=info, cache_session=later)
+                      seconds=time.perf_counter() - t0, config=cfg, cache=info, cache_session=later,
+                      memo=memo)
 
 
 def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:

@@ -4,12 +4,16 @@ Everything is measured side by side in one run (the machine is shared: the load 
 recorded before and after each part):
 
 1. **Re-bake after a change to one lighting key** (``lighting.exposure`` 1.0 -> 1.1: every colour
-   changes, the same rays are traced) against the cold bake, on the 2k bunny (``configs/bunny.toml`` with
+   changes, the same rays are traced, so the lighting stage reuses its trace and the BSP its tree
+   when the merge decisions stay; and then, as the figure for a key that needs new rays, the sun's
+   direction) against the cold bake, on the 2k bunny (``configs/bunny.toml`` with
    ``mesh.simplify.target_triangles = 2000``: sun + AO 64, BSP) and on ``configs/house.toml``.
    Each bake is what ``bake run`` does (``bake.cli.main``: pipeline, outputs, report.md/json/html).
    *In-process*: one Python process with the libraries loaded by an untimed warm-up bake, as under
    ``bake watch``; *CLI*: a new ``bake run`` process per bake (Python start and imports included).
-   Per stage: the seconds of the cold bake, of the re-bake, and of a bake with nothing changed.
+   Per stage: the seconds of the cold bake, of the re-bake, of a bake with nothing changed and of
+   the re-bake after the sun's direction changed, and the seconds outside the stages (outputs,
+   reports and their previews, the cache's loads and stores around the stages).
    Goal: re-bake <= 15% of the cold bake.
 2. **A 4-value AO sweep on the 2k bunny** (``--vary lighting.ao.samples=16,32,64,128``), today's
    code (the base commit ``6f0151f``, checked out with ``git worktree add --detach`` into a
@@ -48,6 +52,8 @@ BUNNY = REPO / "configs" / "bunny.toml"
 HOUSE = REPO / "configs" / "house.toml"
 BUNNY_SETS = ["mesh.simplify.target_triangles=2000"]
 CHANGE = "lighting.exposure=1.1"  # a lighting key that changes every colour, not the rays traced
+# a lighting key that needs new rays (both configs light with one sun; neither points this way)
+SUN = "lighting.lights[0].direction=[0.3, -1.0, 0.5]"
 
 
 def load() -> list[float]:
@@ -56,8 +62,32 @@ def load() -> list[float]:
 
 def _stages(out: Path) -> dict:
     rep = json.loads((out / "report.json").read_text())
-    return {s["name"]: {"seconds": s["seconds"], "from_cache": bool((s["details"].get("cache") or {}).get("from_cache"))}
-            for s in rep["stages"]}
+    return {s["name"]: {"seconds": s["seconds"], "from_cache": bool((s["details"].get("cache") or {}).get("from_cache")),
+                        "reused": _reused(s)} for s in rep["stages"]}
+
+
+def _reused(stage: dict) -> str | None:
+    """What a stage that ran reused inside (bake.cache.Memo): the lighting trace, the BSP tree."""
+    d = stage["details"]
+    if (d.get("cache") or {}).get("from_cache"):
+        return None
+    if (d.get("trace_reused") or {}).get("reused"):
+        return "trace reused"
+    if (d.get("tree_reused") or {}).get("reused"):
+        return "tree reused"
+    return None
+
+
+def _how(st: dict) -> str:
+    if st["from_cache"]:
+        return "from the cache"
+    return "ran, " + st["reused"] if st["reused"] else "ran"
+
+
+def _outside(wall: float, stages: dict) -> float:
+    """Wall seconds of a bake outside its stages: outputs, report.md/json/html (previews), cache I/O
+    before and after the stages, the CLI."""
+    return wall - sum(v["seconds"] for v in stages.values())
 
 
 CPU: dict[Path, float] = {}  # CPU seconds (all threads) of the last in-process bake into a folder
@@ -109,15 +139,25 @@ def rebake(tmp: Path, name: str, cfg: Path, sets: list[str], repeat: int) -> dic
         warm_stages = _stages(out)
         hit = in_process(cli, cfg, sets, out, [CHANGE])
         hit_stages = _stages(out)
+        sun = in_process(cli, cfg, sets, out, [CHANGE, SUN])  # new rays: the trace cannot be reused
+        sun_cpu = CPU[out]
+        sun_stages = _stages(out)
         nocache = in_process(cli, cfg, sets, tmp / f"{name}-nocache-{r}", ["cache.dir=\"none\""])
-        rows.append({"cold": cold, "rebake": warm, "all_cached": hit, "cold_without_cache": nocache,
-                     "cpu_cold": cold_cpu, "cpu_rebake": warm_cpu,
+        rows.append({"cold": cold, "rebake": warm, "all_cached": hit, "rebake_sun": sun, "cold_without_cache": nocache,
+                     "cpu_cold": cold_cpu, "cpu_rebake": warm_cpu, "cpu_rebake_sun": sun_cpu,
+                     "outside_stages": {"cold": _outside(cold, cold_stages), "rebake": _outside(warm, warm_stages),
+                                        "all_cached": _outside(hit, hit_stages),
+                                        "rebake_sun": _outside(sun, sun_stages)},
                      "stages": {k: {"cold": cold_stages[k]["seconds"], "rebake": warm_stages[k]["seconds"],
                                     "rebake_from_cache": warm_stages[k]["from_cache"],
-                                    "all_cached": hit_stages[k]["seconds"]} for k in cold_stages}})
+                                    "rebake_how": _how(warm_stages[k]),
+                                    "all_cached": hit_stages[k]["seconds"],
+                                    "rebake_sun": sun_stages[k]["seconds"], "rebake_sun_how": _how(sun_stages[k])}
+                                for k in cold_stages}})
         print(f"  {name} in-process #{r}: cold {cold:.2f} s (without cache {nocache:.2f} s), re-bake {warm:.2f} s "
-              f"({warm / cold:.1%}), nothing changed {hit:.2f} s; CPU s cold {cold_cpu:.2f}, re-bake {warm_cpu:.2f} "
-              f"({warm_cpu / cold_cpu:.1%})", flush=True)
+              f"({warm / cold:.1%}), nothing changed {hit:.2f} s, new sun direction {sun:.2f} s ({sun / cold:.1%}); "
+              f"CPU s cold {cold_cpu:.2f}, re-bake {warm_cpu:.2f} ({warm_cpu / cold_cpu:.1%}), sun {sun_cpu:.2f}",
+              flush=True)
     out = tmp / f"{name}-cli"
     cli_cold = as_cli(cfg, sets, out)
     cli_warm = as_cli(cfg, sets, out, [CHANGE])
@@ -125,14 +165,25 @@ def rebake(tmp: Path, name: str, cfg: Path, sets: list[str], repeat: int) -> dic
     print(f"  {name} CLI: cold {cli_cold:.2f} s, re-bake {cli_warm:.2f} s ({cli_warm / cli_cold:.1%}), nothing "
           f"changed {cli_hit:.2f} s", flush=True)
     med = {k: statistics.median(r[k] for r in rows)
-           for k in ("cold", "rebake", "all_cached", "cold_without_cache", "cpu_cold", "cpu_rebake")}
+           for k in ("cold", "rebake", "all_cached", "rebake_sun", "cold_without_cache", "cpu_cold", "cpu_rebake",
+                     "cpu_rebake_sun")}
+    outside = {k: statistics.median(r["outside_stages"][k] for r in rows)
+               for k in ("cold", "rebake", "all_cached", "rebake_sun")}
     last = rows[-1]["stages"]
     stage_rows = [{"stage": k, "cold": v["cold"], "rebake": v["rebake"], "all_cached": v["all_cached"],
-                   "rebake_how": "from the cache" if v["rebake_from_cache"] else "ran"} for k, v in last.items()]
-    return {"config": str(cfg.relative_to(REPO)), "set": sets, "change": CHANGE, "runs": rows,
+                   "rebake_sun": v["rebake_sun"], "rebake_how": v["rebake_how"], "rebake_sun_how": v["rebake_sun_how"]}
+                  for k, v in last.items()]
+    stage_rows.append({"stage": "outside the stages", "cold": rows[-1]["outside_stages"]["cold"],
+                       "rebake": rows[-1]["outside_stages"]["rebake"],
+                       "all_cached": rows[-1]["outside_stages"]["all_cached"],
+                       "rebake_sun": rows[-1]["outside_stages"]["rebake_sun"],
+                       "rebake_how": "outputs, reports, previews", "rebake_sun_how": "outputs, reports, previews"})
+    return {"config": str(cfg.relative_to(REPO)), "set": sets, "change": CHANGE, "change_retrace": SUN, "runs": rows,
             "stages_last_run": stage_rows,
-            "median_seconds": med, "rebake_over_cold": med["rebake"] / med["cold"],
+            "median_seconds": med, "median_outside_stages": outside, "rebake_over_cold": med["rebake"] / med["cold"],
+            "rebake_sun_over_cold": med["rebake_sun"] / med["cold"],
             "cpu_rebake_over_cold": med["cpu_rebake"] / med["cpu_cold"],
+            "cpu_rebake_sun_over_cold": med["cpu_rebake_sun"] / med["cpu_cold"],
             "goal_rebake_over_cold": 0.15, "goal_met": med["rebake"] / med["cold"] <= 0.15,
             "cli": {"cold": cli_cold, "rebake": cli_warm, "all_cached": cli_hit,
                     "rebake_over_cold": cli_warm / cli_cold}}
@@ -271,14 +322,16 @@ def main(argv: list[str] | None = None) -> int:
         m = r["median_seconds"]
         result["summary"][name] = {
             "cold": m["cold"], "rebake": m["rebake"], "all_cached": m["all_cached"], "share": r["rebake_over_cold"],
-            "cpu_share": r["cpu_rebake_over_cold"], "cli_cold": r["cli"]["cold"], "cli_rebake": r["cli"]["rebake"],
+            "cpu_share": r["cpu_rebake_over_cold"], "rebake_sun": m["rebake_sun"],
+            "sun_share": r["rebake_sun_over_cold"], "cpu_sun_share": r["cpu_rebake_sun_over_cold"], "cli_cold": r["cli"]["cold"], "cli_rebake": r["cli"]["rebake"],
             "cli_share": r["cli"]["rebake_over_cold"], "goal": "met" if r["goal_met"] else "not met"}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     for name, r in result["rebake"].items():
         print(f"{name}: re-bake {r['median_seconds']['rebake']:.2f} s / cold {r['median_seconds']['cold']:.2f} s = "
               f"{r['rebake_over_cold']:.1%} (goal <= 15%: {'met' if r['goal_met'] else 'NOT met'}); "
-              f"CPU {r['cpu_rebake_over_cold']:.1%}; CLI {r['cli']['rebake_over_cold']:.1%}")
+              f"CPU {r['cpu_rebake_over_cold']:.1%}; CLI {r['cli']['rebake_over_cold']:.1%}; new sun direction "
+              f"{r['rebake_sun_over_cold']:.1%} (CPU {r['cpu_rebake_sun_over_cold']:.1%})")
     s = result["sweep"]
     if "new_over_today" in s:
         print(f"sweep: {statistics.median(s['new_seconds']):.1f} s / {statistics.median(s['today_seconds']):.1f} s "

@@ -30,6 +30,8 @@ class SourceFaces:
     tri_list: np.ndarray  # the scene triangles each source face stands for
     merged: int  # triangles absorbed into another face
     dropped: int = 0  # input triangles left out (collapsed to a line or point by rounding)
+    kept_triangles: np.ndarray | None = None  # the scene triangles merged (not left out), in order
+    n_input_corners: int = 0  # 3 x the triangles merged (the tape's first corner ids)
 
 
 def merge_coplanar(pos_n: np.ndarray, tris: np.ndarray, attr: np.ndarray, group: np.ndarray,

@@ -43,6 +43,48 @@ class SplitResult:
     grid_kept: int = 0  # ... of them, because a piece snapped to the grid would be collapsed or tilted
 
 
+class Tape:
+    """Where every cut corner's attributes came from, so they can be computed again for other
+    attribute values without building the tree again (bake/bsp/stage.py reuses a tree when only
+    the vertex colours changed).
+
+    Attribute channel ``ch`` holds an id instead of an attribute: the input corners are ids
+    0 .. n0 - 1; each corner a cut makes gets the next id, and the tape records its two parent
+    ids and the cut parameter ``t`` (the new corner is ``a + t * (b - a)``, computed exactly as
+    :func:`_cut` computes it). Every other step only moves attributes (gathers, padding, fans),
+    so :meth:`replay` on the same input values gives the same bits as the build."""
+
+    def __init__(self, ch: int, n0: int):
+        self.ch = ch
+        self.n0 = n0
+        self.next = n0
+        self.batches: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def record(self, Aa: np.ndarray, Ab: np.ndarray, t: np.ndarray, cross: np.ndarray, Ai: np.ndarray) -> None:
+        n = int(cross.sum())
+        if not n:
+            return
+        a = Aa[..., self.ch][cross].astype(np.int64)
+        b = Ab[..., self.ch][cross].astype(np.int64)
+        view = Ai[..., self.ch]
+        view[cross] = np.arange(self.next, self.next + n, dtype=np.float64)
+        self.batches.append((self.next, a, b, np.array(t[..., 0][cross], np.float64)))
+        self.next += n
+
+    def state(self) -> dict:
+        return {"ch": self.ch, "n0": self.n0, "next": self.next, "batches": list(self.batches)}
+
+    @staticmethod
+    def replay(state: dict, base: np.ndarray) -> np.ndarray:
+        """(ids, C) values of every id for input corner values ``base`` (n0, C)."""
+        vals = np.empty((state["next"], base.shape[1]))
+        vals[:state["n0"]] = base
+        for start, a, b, t in state["batches"]:
+            va, vb = vals[a], vals[b]
+            vals[start:start + len(a)] = va + t[:, None] * (vb - va)
+        return vals
+
+
 class FaceStore:
     """An append-only set of convex fragments of source faces.
 
@@ -63,6 +105,7 @@ class FaceStore:
         self.whole = np.zeros(cap, bool)
         self.n = 0
         self.grid = None  # (center, scale, decimals): cut vertices snapped to the written grid
+        self.tape: Tape | None = None  # records where cut corners' attributes came from
         self.src_plane = np.asarray(src_plane, np.float64)
         self.src_degenerate = np.asarray(src_degenerate, bool)
         self.src_two_sided = np.asarray(src_two_sided, bool)
@@ -87,6 +130,7 @@ class FaceStore:
         c.src_plane, c.src_degenerate, c.src_two_sided = self.src_plane, self.src_degenerate, self.src_two_sided
         c.src_center = self.src_center
         c.grid = self.grid
+        c.tape = self.tape
         c.append(self.pos[ids], self.attr[ids], self.vid[ids], self.count[ids], self.src[ids])
         c.whole[:len(ids)] = self.whole[ids]
         return c
@@ -259,6 +303,8 @@ def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, mi
     Aa, Ab = np.take_along_axis(A, ia[..., None], 1), np.take_along_axis(A, ib[..., None], 1)
     Pi = store.snap(Pa + t * (Pb - Pa))  # on the grid the positions are written on
     Ai = Aa + t * (Ab - Aa)
+    if store.tape is not None:
+        store.tape.record(Aa, Ab, t, cross, Ai)
 
     candP = np.stack([P, Pi], axis=2).reshape(m, 2 * K, 3)
     candA = np.stack([A, Ai], axis=2).reshape(m, 2 * K, store.A)

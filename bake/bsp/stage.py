@@ -8,6 +8,7 @@ big it is; only the written planes are in world units.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from typing import Any
@@ -21,7 +22,7 @@ from ..scratch.numbers import format_numbers, json_array, project_json_bytes, ro
 from .cost import blocks_estimate, walk_counts
 from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
-from .split import FaceStore, face_planes
+from .split import FaceStore, Tape, face_planes
 
 NODES_LIST = "bsp nodes"
 PLANES_LIST = "bsp planes"
@@ -88,15 +89,37 @@ def tolerance(scene: Scene, opt: BuildOptions) -> float:
     return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True):
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False):
     """Everything but writing the scene: (store, sources, tree, encoded, frame).
 
     With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
     they will be written: input positions rounded, every vertex a cut makes snapped to the grid,
     a cut whose snapped pieces would be collapsed, flipped or tilted not made, triangles that
-    rounding collapses left out, and the on-plane tolerance at least a grid step."""
+    rounding collapses left out, and the on-plane tolerance at least a grid step.
+
+    ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
+    from (:class:`bake.bsp.split.Tape`; the result is the same either way)."""
     center, scale = frame(scene)
     opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
+    src, two, ch = merged(scene, opt, merge, tape)
+    plane, degen = face_planes(src.pos, src.count, opt.min_area)
+    first_tri = src.tri_list[src.tri_start[:-1]]
+    store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
+    if ch is not None:
+        store.tape = Tape(ch, src.n_input_corners)
+    if scene.position_decimals is not None:
+        store.grid = (center, scale, scene.position_decimals)
+    tree = build_tree(store, opt, center, scale)
+    frag_tris = fragment_triangles(store, src)
+    enc = encode(tree, frag_tris)
+    return store, src, tree, enc, (center, scale)
+
+
+def merged(scene: Scene, opt: BuildOptions, merge: bool, tape: bool = False) -> tuple[SourceFaces, np.ndarray, int | None]:
+    """The source faces (coplanar triangles merged; ``opt.epsilon`` already the tree's tolerance),
+    each triangle's sidedness, and the attribute channel that holds corner ids for the tape (None:
+    no tape; only with ``tape`` and vertex colours)."""
+    center, scale = frame(scene)
     pos_w = written_positions(scene)
     pos_n = (pos_w - center) / scale
     keep = np.arange(scene.n_triangles)
@@ -108,23 +131,23 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True):
     two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
     attr, layout = _attributes(scene)
     attr = attr[keep]
+    ch = None
+    if tape and "vertex_color" in layout:  # corner ids ride along as one more attribute
+        ch = attr.shape[2]
+        attr = np.concatenate([attr, np.arange(3 * len(keep), dtype=np.float64).reshape(-1, 3, 1)], axis=2)
     seen = np.ones((len(tris), attr.shape[2]), bool)
     if "uv" in layout:  # an untextured material shows no UVs: they need not agree to merge
         textured = np.array([m.texture is not None or m.texture_data is not None for m in scene.materials], bool)
         seen[:, layout["uv"]] = textured[np.clip(scene.tri_material[keep], 0, len(textured) - 1)][:, None]
+    if ch is not None:
+        seen[:, ch] = False  # (an id is not an attribute: it never decides a merge)
     src = merge_coplanar(pos_n, tris, attr, _groups(scene, two)[keep], opt.epsilon, opt.min_area,
                          enabled=merge, seen=seen)
     src.tri_list = keep[src.tri_list]  # scene triangle numbers
     src.dropped = int(scene.n_triangles - len(keep))
-    plane, degen = face_planes(src.pos, src.count, opt.min_area)
-    first_tri = src.tri_list[src.tri_start[:-1]]
-    store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
-    if scene.position_decimals is not None:
-        store.grid = (center, scale, scene.position_decimals)
-    tree = build_tree(store, opt, center, scale)
-    frag_tris = fragment_triangles(store, src)
-    enc = encode(tree, frag_tris)
-    return store, src, tree, enc, (center, scale)
+    src.kept_triangles = keep
+    src.n_input_corners = 3 * len(keep)
+    return src, two, ch
 
 
 def fragment_triangles(store: FaceStore, src: SourceFaces) -> np.ndarray:
@@ -141,6 +164,36 @@ def fragment_triangles(store: FaceStore, src: SourceFaces) -> np.ndarray:
 def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, center: np.ndarray,
                 scale: float) -> tuple[Scene, dict]:
     """The scene with its triangles replaced by the fragments, in the encoded order."""
+    layout = split_layout(scene, store, src, enc, center, scale)
+    return apply_layout(scene, layout), layout
+
+
+def apply_layout(scene: Scene, layout: dict) -> Scene:
+    """The scene with its triangles replaced by a :func:`split_layout`'s: positions, corners, UVs
+    and polygons from the layout, materials and colours (``face_colors``, ``face_albedo``) taken
+    from ``scene`` through each output triangle's source triangle. Only this step reads the
+    scene's per-triangle colours, so a layout made for one set of colours applies to another
+    (:func:`stage` reuses it when nothing the layout depends on changed)."""
+    src_tri = layout["source_triangle"]
+    return scene.replace(
+        positions=layout["positions"],
+        triangles=layout["triangles"],
+        tri_material=scene.tri_material[src_tri].copy(),
+        tri_uvs=layout["tri_uvs"],
+        tri_polygon=layout["tri_polygon"],
+        vertex_colors=layout["vertex_colors"],
+        face_colors=None if scene.face_colors is None else scene.face_colors[src_tri].copy(),
+        face_albedo=None if scene.face_albedo is None else scene.face_albedo[src_tri].copy(),
+        tri_lightmap_uvs=layout["tri_lightmap_uvs"],
+    )
+
+
+def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, center: np.ndarray,
+                 scale: float) -> dict:
+    """The split, reordered triangles as arrays (:func:`apply_layout` makes the scene of them):
+    positions (with the vertices cuts made), corners, UVs, lightmap UVs, vertex colours,
+    polygons, and for each output triangle the scene triangle whose material and colour it keeps
+    (``source_triangle``) and its source face; for each input triangle its source face."""
     order = enc.frag_order
     ntri = enc.frag_tris
     T_out = int(ntri.sum())
@@ -181,6 +234,10 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
     new_pos = np.zeros((0, 3))
     new_vc = np.zeros((0, 4))
     n_new = 0
+    # with a tape: the cut corners that became new vertices (their corner ids and positions) and
+    # the vertex each became, to give them other colours later (recolour)
+    replay = None if store.tape is None else {"ids": np.zeros(0, np.int64), "pos": np.zeros((0, 3)),
+                                              "inv": np.zeros(0, np.int64)}
     if len(cf):
         f = order[cf]
         c = store.count[f]
@@ -204,6 +261,9 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
                 new_pos = round_positions(new_pos, scene.position_decimals)
             new_vc = uniq[:, 3:]
             n_new = len(uniq)
+            if replay is not None:
+                replay = {"ids": cattr[need][:, store.tape.ch].astype(np.int64), "pos": cpos[need],
+                          "inv": inv.ravel().astype(np.int64)}
         dst = slot[cf][rep] + (i - 1)
         out_tris[dst] = vid
         if uv_s:
@@ -217,21 +277,12 @@ def write_scene(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded, 
     vcol = scene.vertex_colors
     if vcol is not None and n_new:
         vcol = np.concatenate([vcol, np.clip(new_vc, 0.0, 1.0)])
-    new = scene.replace(
-        positions=positions,
-        triangles=out_tris,
-        tri_material=scene.tri_material[out_src_tri].copy(),
-        tri_uvs=out_uv,
-        tri_polygon=out_poly,
-        vertex_colors=vcol,
-        face_colors=None if scene.face_colors is None else scene.face_colors[out_src_tri].copy(),
-        face_albedo=None if scene.face_albedo is None else scene.face_albedo[out_src_tri].copy(),
-        tri_lightmap_uvs=out_lm,
-    )
     in_face = np.full(scene.n_triangles, -1, np.int64)
     in_face[src.tri_list] = np.repeat(np.arange(len(src.count)), np.diff(src.tri_start))
-    return new, {"new_vertices": n_new, "source_triangle": out_src_tri, "source_face": out_face,
-                 "input_source_face": in_face}
+    return {"positions": positions, "triangles": out_tris, "tri_uvs": out_uv, "tri_polygon": out_poly,
+            "vertex_colors": vcol, "tri_lightmap_uvs": out_lm, "new_vertices": n_new,
+            "source_triangle": out_src_tri, "source_face": out_face, "input_source_face": in_face,
+            "replay": replay}
 
 
 def typical_walk(scene: Scene, enc: Encoded) -> dict:
@@ -254,6 +305,153 @@ def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tu
     return len(items), project_json_bytes(name, json_array(items))
 
 
+def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool) -> list:
+    """The key of a reusable tree: everything of the scene and options the tree and the split
+    layout depend on except the colours. Positions and their grid, corners, materials (sidedness,
+    textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and the merge
+    groups (material, sidedness, face colour and albedo, as the group numbers :func:`_groups`
+    gives: a colour change that makes two groups one, or splits one, is a new key). The
+    per-triangle colours never reach the tree (:func:`apply_layout` takes them from the scene);
+    the vertex colours decide merges and cut vertices, which :func:`recolour` checks."""
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
+    return ["bsp tree 1", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
+            scene.positions, scene.position_decimals, scene.triangles, scene.tri_material, mats,
+            scene.tri_polygon, scene.tri_uvs, scene.tri_lightmap_uvs,
+            None if scene.vertex_colors is None else list(scene.vertex_colors.shape),
+            _canonical(_groups(scene, two))]
+
+
+def _canonical(labels: np.ndarray) -> np.ndarray:
+    """Group numbers renumbered by first appearance: the same partition gives the same numbers
+    (merging compares group numbers for equality only)."""
+    _, first, inv = np.unique(labels, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(len(first))
+    return rank[inv.ravel()]
+
+
+def make(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
+    """Build the tree and the split layout: what :func:`finish` turns into the stage's scene and
+    record, for these colours or others that give the same merge groups."""
+    t0 = time.perf_counter()
+    T_in = scene.n_triangles
+    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True)
+    layout = split_layout(scene, store, src, enc, center, scale)
+    recolour_state = None
+    if store.tape is not None:
+        recolour_state = {"tape": store.tape.state(), "merge": _merge_signature(src, scene)}
+    nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
+    planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
+    stack_bound = 2 * enc.max_depth + 2
+    tol = tolerance(scene, opt)
+    T_out = len(layout["triangles"])
+    st = tree.stats
+    records = sum(enc.records.values())
+    counts_out = {"triangles": T_out, "vertices": len(layout["positions"]), "bsp_records": records,
+                  "bsp_planes": len(enc.planes), "bsp_items": nodes_items + planes_items}
+    details = {
+        "inflation": round(T_out / T_in - 1.0, 6),
+        "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
+        "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),
+        "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
+        "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],
+        "new_vertices": layout["new_vertices"],
+        "grid": None if scene.position_decimals is None else 10.0 ** -scene.position_decimals,
+        "tolerance": tol, "collapsed_input_triangles": src.dropped, "grid_kept_whole": st.get("grid_kept", 0),
+        "lists": {NODES_LIST: {"items": nodes_items, "project_json_bytes": nodes_bytes},
+                  PLANES_LIST: {"items": planes_items, "project_json_bytes": planes_bytes}},
+        "bytes_per_record": round((nodes_bytes + planes_bytes) / max(1, records), 3),
+        "bytes_per_triangle": round((nodes_bytes + planes_bytes) / max(1, T_out), 3),
+        "items_per_triangle": round((nodes_items + planes_items) / max(1, T_out), 4),
+        "seconds": {"build": round(st["seconds"], 4), "leaf_tests": round(st["leaf_seconds"], 4),
+                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
+        "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
+    }
+    details["walk"] = typical_walk(apply_layout(scene, layout), enc)
+    warnings = []
+    if src.dropped:
+        warnings.append(f"{src.dropped} triangle(s) have zero area at the written positions (rounded to "
+                        f"{10.0 ** -scene.position_decimals:g}) and were left out")
+    if st["kept_whole"]:
+        why = f"below the minimum area ({opt.min_area:g} of diagonal^2)"
+        if scene.position_decimals is not None:
+            why += " or collapsed, flipped or tilted on the written grid"
+        warnings.append(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been {why}")
+    return {"layout": layout, "recolour": recolour_state, "nodes": enc.nodes, "planes": enc.planes, "stack_bound": stack_bound,
+            "tolerance": tol, "epsilon": opt.epsilon, "counts_out": counts_out,
+            "inflation": T_out / T_in - 1.0, "details": details, "warnings": warnings,
+            "seconds": time.perf_counter() - t0}
+
+
+def _merge_signature(src: SourceFaces, scene: Scene) -> str:
+    """A digest of the merged source faces apart from their vertex colours: two scenes whose
+    merges came out the same (same faces, corners and corner ids) have the same signature."""
+    from ..cache import content_digest
+
+    _, layout = _attributes(scene)
+    chans = np.ones(src.attr.shape[2], bool)
+    if "vertex_color" in layout:
+        chans[layout["vertex_color"]] = False
+    return content_digest(src.pos, src.count, src.vid, src.tri_start, src.tri_list, src.attr[..., chans])
+
+
+def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict | None:
+    """``made`` (a :func:`make` for a scene that differed from this one only in its colours) for
+    this scene's vertex colours, or None when they change a decision the build made with them:
+    which coplanar faces merged (attributes must be affine over a merged face: merged again and
+    compared) or which cut corners became one vertex (a new vertex is one position and colour).
+    The cut corners' colours come from the tape, computed exactly as the build computes them, so
+    the result is the bytes a build with these colours gives."""
+    state = made["recolour"]
+    layout = made["layout"]
+    if scene.vertex_colors is None or state is None:
+        return made if scene.vertex_colors is None and state is None else None
+    src, _, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
+    if ch is None or _merge_signature(src, scene) != state["merge"]:
+        return None
+    corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
+    rp = layout["replay"]
+    n_new = int(layout["new_vertices"])
+    vcol = scene.vertex_colors
+    if n_new:
+        vals = Tape.replay(state["tape"], corners)
+        key = np.concatenate([rp["pos"], vals[rp["ids"]]], 1)
+        uniq, inv = np.unique(key, axis=0, return_inverse=True)
+        if len(uniq) != n_new or not np.array_equal(inv.ravel(), rp["inv"]):
+            return None
+        vcol = np.concatenate([vcol, np.clip(uniq[:, 3:], 0.0, 1.0)])
+    return {**made, "layout": {**layout, "vertex_colors": vcol}}
+
+
+def finish(scene: Scene, made: dict, rec: StageRecord) -> Scene:
+    """The stage's scene from a :func:`make` (this bake's or a reused one), and its record's
+    figures (the same either way)."""
+    layout = made["layout"]
+    new = apply_layout(scene, layout)
+    new = new.with_list(ScratchList(NODES_LIST, made["nodes"].copy(), 0, _NODES_DOC, "int"))
+    new = new.with_list(ScratchList(PLANES_LIST, made["planes"].ravel().copy(), 4, _PLANES_DOC, "number"))
+    new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": made["stack_bound"],
+                                    "epsilon": made["tolerance"],
+                                    "source_triangle": layout["source_triangle"],
+                                    "source_face": layout["source_face"],
+                                    "input_source_face": layout["input_source_face"]})
+    rec.counts_in = {"triangles": scene.n_triangles, "vertices": scene.n_vertices}
+    rec.counts_out = dict(made["counts_out"])
+    rec.accuracy = {"inflation": made["inflation"]}
+    rec.details = copy.deepcopy(made["details"])
+    for w in made["warnings"]:
+        rec.warn(w)
+    return new
+
+
+def _memo():
+    from ..cache import active_memo
+
+    return active_memo()
+
+
 def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     rec = StageRecord("bsp")
@@ -268,58 +466,42 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         rec.warn("no triangles: empty BSP")
         rec.seconds = time.perf_counter() - t0
         return new, rec
-    store, src, tree, enc, (center, scale) = build(scene, opt, merge)
-    new, info = write_scene(scene, store, src, enc, center, scale)
-    nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
-    planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
-    new = new.with_list(ScratchList(NODES_LIST, enc.nodes.copy(), 0, _NODES_DOC, "int"))
-    new = new.with_list(ScratchList(PLANES_LIST, enc.planes.ravel().copy(), 4, _PLANES_DOC, "number"))
-    stack_bound = 2 * enc.max_depth + 2
-    tol = tolerance(scene, opt)
-    new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": stack_bound,
-                                    "epsilon": tol,
-                                    "source_triangle": info["source_triangle"],
-                                    "source_face": info["source_face"],
-                                    "input_source_face": info["input_source_face"]})
-    T_out = new.n_triangles
-    st = tree.stats
-    records = sum(enc.records.values())
-    rec.counts_in = {"triangles": T_in, "vertices": scene.n_vertices}
-    rec.counts_out = {"triangles": T_out, "vertices": new.n_vertices, "bsp_records": records,
-                      "bsp_planes": len(enc.planes), "bsp_items": nodes_items + planes_items}
-    rec.accuracy = {"inflation": T_out / T_in - 1.0}
-    rec.details = {
-        "inflation": round(T_out / T_in - 1.0, 6),
-        "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
-        "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),
-        "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
-        "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],
-        "new_vertices": info["new_vertices"],
-        "grid": None if scene.position_decimals is None else 10.0 ** -scene.position_decimals,
-        "tolerance": tol, "collapsed_input_triangles": src.dropped, "grid_kept_whole": st.get("grid_kept", 0),
-        "lists": {NODES_LIST: {"items": nodes_items, "project_json_bytes": nodes_bytes},
-                  PLANES_LIST: {"items": planes_items, "project_json_bytes": planes_bytes}},
-        "bytes_per_record": round((nodes_bytes + planes_bytes) / max(1, records), 3),
-        "bytes_per_triangle": round((nodes_bytes + planes_bytes) / max(1, T_out), 3),
-        "items_per_triangle": round((nodes_items + planes_items) / max(1, T_out), 4),
-        "seconds": {"build": round(st["seconds"], 4), "leaf_tests": round(st["leaf_seconds"], 4),
-                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
-        "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
-    }
-    rec.details["walk"] = typical_walk(new, enc)
-    if src.dropped:
-        rec.warn(f"{src.dropped} triangle(s) have zero area at the written positions (rounded to "
-                 f"{10.0 ** -scene.position_decimals:g}) and were left out")
-    if st["kept_whole"]:
-        why = f"below the minimum area ({opt.min_area:g} of diagonal^2)"
-        if scene.position_decimals is not None:
-            why += " or collapsed, flipped or tilted on the written grid"
-        rec.warn(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been {why}")
+    # A tree built for the same geometry, options and merge groups is reused (a bake whose
+    # lighting changed): bake.cache.Memo, the stage cache's store, keyed by tree_key_parts.
+    memo = _memo()
+    key = made = None
+    if memo is not None:
+        key = memo.key("bsp", *tree_key_parts(scene, opt, merge))
+        made = memo.get("bsp", key)
+        if made is not None and not _is_made(made):
+            memo.forget("bsp", key, "does not hold a BSP tree")
+            made = None
+        if made is not None:  # the same geometry and groups: the vertex colours may still decide
+            made = recolour(scene, opt, merge, made)
+    reused = made is not None
+    if made is None:
+        made = make(scene, opt, merge)
+        if memo is not None:
+            memo.put("bsp", key, made)
+    new = finish(scene, made, rec)
+    if memo is not None:
+        for w in memo.take_warnings():
+            rec.warn(w)
+    rec.details["tree_reused"] = {"reused": reused, "built_seconds": round(float(made["seconds"]), 6)}
     rec.seconds = time.perf_counter() - t0
     return new, rec
+
+
+def _is_made(made: Any) -> bool:
+    """A loaded memo holds what :func:`make` returns (the entry format checked the types inside)."""
+    keys = {"layout", "recolour", "nodes", "planes", "stack_bound", "tolerance", "epsilon", "counts_out", "inflation",
+            "details", "warnings", "seconds"}
+    return isinstance(made, dict) and keys <= set(made) and isinstance(made["layout"], dict) and \
+        isinstance(made["nodes"], np.ndarray) and isinstance(made["planes"], np.ndarray) and \
+        isinstance(made["details"], dict) and isinstance(made["warnings"], list)
 
 
 _NODES_DOC = NODES_DOC
 _PLANES_DOC = "a, b, c, d per BSP plane (eye in front when a*x + b*y + c*z - d >= 0)"
 
-__all__ = ["stage", "build", "write_scene", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]
+__all__ = ["stage", "build", "write_scene", "split_layout", "apply_layout", "make", "finish", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]

@@ -414,10 +414,11 @@ def _sweeps_section(sweeps: list[dict], report: dict | None = None) -> str:
 
 # --------------------------------------------------------------------------- the page
 def build(out_dir: Path, *, width: int = 320, height: int = 240,
-          files: dict[str, bytes] | None = None) -> tuple[str, dict[str, Any]]:
+          files: dict[str, bytes] | None = None, memo: Any = None) -> tuple[str, dict[str, Any]]:
     """The report page for a finished bake in ``out_dir`` and facts about what it shows.
     ``files`` (relative path -> bytes): a bake's outputs not yet on disk, read instead of the
-    folder's (``bake run`` renders the page before it commits anything)."""
+    folder's (``bake run`` renders the page before it commits anything). ``memo``: the stage
+    cache's memos, which keep the previews' geometry (``preview.render_view``)."""
     from . import preview
 
     out_dir = Path(out_dir)
@@ -436,7 +437,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     mesh = preview.mesh_from_lists(lists, report, lightmap=lm_img)
     tie = max(float(cfg.get("bsp", {}).get("epsilon", 1e-6)), 2.0 * 10.0 ** -int(cfg.get("export", {}).get(
         "precision", 5)))  # the tree's epsilon, or the rounding of the written positions
-    views = preview.render_views(mesh, width, height, tie) if mesh is not None and len(mesh.tris) else []
+    views = preview.render_views(mesh, width, height, tie, memo=memo) if mesh is not None and len(mesh.tris) else []
     sweeps = load_sweeps(out_dir)
     s = report.get("scene", {})
     title = Path(report.get("input", {}).get("path") or "bake").name

@@ -11,6 +11,7 @@ an interrupted bake leaves every file old or the whole folder new.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -95,7 +96,10 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
 
             w = cfg.report.preview_width
             page, _ = html.build(out_dir, width=w, height=max(1, w * 3 // 4),
-                                 files={**files, "report.json": rep_json})
+                                 files={**files, "report.json": rep_json}, memo=result.memo)
+            if result.memo is not None:  # (report.json is written: a damaged preview memo is said here)
+                for w_ in result.memo.take_warnings():
+                    print(f"warning: {w_}", file=sys.stderr)
             stamp = None
             if live_report:
                 page, stamp = html.make_live(page)

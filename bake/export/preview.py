@@ -253,46 +253,137 @@ def difference(painter: Image, zbuf: Image, pimg: np.ndarray, zimg: np.ndarray, 
     centre is within ``edge_px`` of either triangle's edge, else *wrong* (a visible order error).
     Drawn on the faded depth-buffer render: wrong red, edge orange, tie yellow; pixels whose
     colour does not change are not marked (the author cannot see them)."""
+    tie, edge = mismatch_kinds(painter, zbuf, camera, corners, tie_tol, edge_px)
+    return _difference(painter.tri_id, zbuf.tri_id, tie, edge, pimg, zimg)
+
+
+def mismatch_kinds(painter: Image, zbuf: Image, camera: Camera, corners: np.ndarray, tie_tol: float,
+                   edge_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(tie, edge) masks of :func:`difference`: what the geometry alone decides (no colour)."""
     from ..bsp.verify import near_coplanar
 
     mis = (painter.tri_id != zbuf.tri_id) & zbuf.covered
-    visible = np.abs(pimg.astype(np.int16) - zimg.astype(np.int16)).max(2) > VISIBLE
     tie = mis & near_coplanar(camera, corners, zbuf, painter, mis, tie_tol)
     edge = mis & ~tie & ((zbuf.edge <= edge_px) | (painter.edge <= edge_px))
+    return tie, edge
+
+
+def _difference(p_id: np.ndarray, z_id: np.ndarray, tie: np.ndarray, edge: np.ndarray, pimg: np.ndarray,
+                zimg: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+    covered_mask = z_id >= 0
+    mis = (p_id != z_id) & covered_mask
+    visible = np.abs(pimg.astype(np.int16) - zimg.astype(np.int16)).max(2) > VISIBLE
     wrong = mis & ~tie & ~edge & visible
     out = np.rint(zimg.astype(np.float64) * 0.25 + 0.75 * 255).astype(np.uint8)
     out[tie & visible] = (240, 200, 0)
     out[edge & visible] = (245, 140, 30)
     out[wrong] = (220, 0, 0)
-    covered = int(zbuf.covered.sum())
+    covered = int(covered_mask.sum())
     return out, {"covered_pixels": covered, "wrong_pixels": int(wrong.sum()),
                  "edge_pixels": int((edge & visible).sum()), "tie_pixels": int((tie & visible).sum()),
                  "unseen_differences": int((mis & ~visible).sum()),
                  "wrong_fraction": float(wrong.sum() / covered) if covered else 0.0}
 
 
-def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light: bool = True
-                ) -> tuple[View, Image]:
+def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light: bool = True,
+                memo: Any = None) -> tuple[View, Image]:
     """One view (see :func:`render_views`) and the painter's :class:`bake.render.Image` behind it
     (which triangle each pixel shows, how far it is from that triangle's edge). ``light``: see
-    :func:`shade`."""
+    :func:`shade`.
+
+    ``memo`` (a :class:`bake.cache.Memo`): the renders' geometry -- which triangle each pixel
+    shows in both renders, the tie and edge pixels, the draw order's size and origin -- depends
+    on the written positions, triangles, sidedness, the BSP lists and the camera, not on the
+    colours, so it is stored under those and reused by a bake that changed only colours; the
+    colours, the difference image and its counts are computed again. (The painter's image it
+    returns then has ``tri_id`` only.)"""
     corners = mesh.corners
     diag = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if len(mesh.verts) else 1.0
     two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
-    order, how = painter_order(mesh, cam.position)
-    pim = render(cam, corners, mode="painter", order=order, two_sided=two)
-    zim = render(cam, corners, mode="zbuffer", two_sided=two)
+    key = geo = None
+    if memo is not None:
+        key = memo.key("preview", "preview geometry 1", cam, mesh.verts, mesh.tris, mesh.material, mesh.two_sided,
+                       _numbers(mesh.bsp_nodes), _numbers(mesh.bsp_planes), float(tie))
+        raw = memo.get("preview", key)
+        if raw is not None:
+            geo = _unpack_geometry(raw, cam)
+            if geo is None:
+                memo.reused.pop()
+                memo.forget("preview", key, "does not hold a preview's geometry for this camera")
+    if geo is None:
+        order, how = painter_order(mesh, cam.position)
+        pim = render(cam, corners, mode="painter", order=order, two_sided=two)
+        zim = render(cam, corners, mode="zbuffer", two_sided=two)
+        t_mask, e_mask = mismatch_kinds(pim, zim, cam, corners, tie * diag)
+        geo = {"painter": pim.tri_id, "zbuffer": zim.tri_id, "tie": t_mask, "edge": e_mask, "order": how,
+               "drawn": int(len(order))}
+        if memo is not None:
+            memo.put("preview", key, _pack_geometry(geo))
+    else:
+        pim = Image(image=None, tri_id=geo["painter"], depth=None, edge=None)
+        zim = Image(image=None, tri_id=geo["zbuffer"], depth=None, edge=None)
     pimg, zimg = shade(mesh, cam, pim, light=light), shade(mesh, cam, zim, light=light)
-    diff, stats = difference(pim, zim, pimg, zimg, cam, corners, tie * diag)
-    stats.update({"order": how, "drawn": int(len(order)), "colours": mesh.colour_source})
+    diff, stats = _difference(geo["painter"], geo["zbuffer"], geo["tie"], geo["edge"], pimg, zimg)
+    stats.update({"order": geo["order"], "drawn": geo["drawn"], "colours": mesh.colour_source})
     return View(name, cam, pimg, zimg, diff, stats), pim
 
 
-def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1e-5) -> list[View]:
+def _numbers(items: list | None) -> np.ndarray | None:
+    """A list of numbers as one float64 array (exact for the lists' integers and doubles), for a
+    key: hashing it is one blob, not an object per item."""
+    if items is None:
+        return None
+    try:
+        return np.asarray(items, np.float64)  # (a numeric string stands for its number, as in the walk)
+    except (TypeError, ValueError):
+        return items
+
+
+def _pack_geometry(geo: dict) -> dict:
+    """A view's geometry compactly (triangle ids as zlib'd int32, masks as bits)."""
+    import zlib
+
+    out = {k: geo[k] for k in ("order", "drawn")}
+    out["shape"] = list(geo["painter"].shape)
+    for k in ("painter", "zbuffer"):
+        out[k] = zlib.compress(np.ascontiguousarray(geo[k], np.int32).tobytes(), 1)
+    for k in ("tie", "edge"):
+        out[k] = np.packbits(geo[k].ravel()).tobytes()
+    return out
+
+
+def _unpack_geometry(packed: Any, cam: Camera) -> dict | None:
+    """:func:`_pack_geometry` back, or None when it is not one of this camera's size."""
+    import zlib
+
+    if not isinstance(packed, dict):
+        return None
+    try:
+        H, W = (int(x) for x in packed["shape"])
+        if (H, W) != (int(cam.height), int(cam.width)):
+            return None
+        out = {"order": str(packed["order"]), "drawn": int(packed["drawn"])}
+        for k in ("painter", "zbuffer"):
+            a = np.frombuffer(zlib.decompress(packed[k]), np.int32)
+            if a.size != H * W:
+                return None
+            out[k] = a.astype(np.int64).reshape(H, W)
+        for k in ("tie", "edge"):
+            bits = np.frombuffer(packed[k], np.uint8)
+            if bits.size != (H * W + 7) // 8:
+                return None
+            out[k] = np.unpackbits(bits)[:H * W].astype(bool).reshape(H, W)
+    except (KeyError, TypeError, ValueError, zlib.error):
+        return None
+    return out
+
+
+def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1e-5, *,
+                 memo: Any = None) -> list[View]:
     """Each camera of :func:`cameras`: painter's render in the engine's order, the z-buffer
     render, and their difference. ``tie``: faces this close (a fraction of the bounding-box
-    diagonal) count as coplanar (:func:`difference`)."""
-    return [render_view(mesh, name, cam, tie, light=name != "green flag")[0]
+    diagonal) count as coplanar (:func:`difference`). ``memo``: see :func:`render_view`."""
+    return [render_view(mesh, name, cam, tie, light=name != "green flag", memo=memo)[0]
             for name, cam in cameras(mesh.verts, width, height)]
 
 

@@ -105,7 +105,9 @@ def _cache_json(info: dict[str, Any] | None) -> dict[str, Any] | None:
         return None
     return {"where": info.get("where"), "from_cache": list(info.get("from_cache", [])),
             "stored": list(info.get("stored", [])), "warnings": list(info.get("warnings", [])),
-            "load_seconds": round(float(info.get("load_seconds", 0.0)), 6)}
+            "load_seconds": round(float(info.get("load_seconds", 0.0)), 6),
+            # results reused inside stages that ran (bake.cache.Memo: "bsp" = the tree)
+            "memos_reused": list(info.get("memos_reused", []))}
 
 
 def cache_note(stage: dict[str, Any]) -> str:

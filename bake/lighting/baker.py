@@ -77,6 +77,7 @@ class _Store:
 
 class Baker:
     def __init__(self, scene: Scene, cfg: LightingConfig, plan: Plan, albedo=None):
+        self.t_start = time.perf_counter()
         self.cfg = cfg
         self.plan = plan
         self.albedo_fn = albedo
@@ -321,16 +322,15 @@ class Baker:
             self.F.se[k] = np.where(self.f_done, self.F.se[k], fs)
 
     def vertex_from_faces(self, face_vals: np.ndarray) -> np.ndarray:
-        V = len(self.pos)
-        w = np.repeat(self.area, 3)
-        flat = self.tris.ravel()
-        tot = np.bincount(flat, weights=w, minlength=V)
-        out = np.zeros((V, face_vals.shape[1]))
-        for c in range(face_vals.shape[1]):  # channels
-            out[:, c] = np.bincount(flat, weights=w * np.repeat(face_vals[:, c], 3), minlength=V)
-        return np.divide(out, tot[:, None], out=np.zeros_like(out), where=tot[:, None] > 0)
+        return _vertex_from_faces(self.tris, self.area, len(self.pos), face_vals)
 
     def run(self) -> Scene:
+        self.trace()
+        return coloured(self.traced(), self.cfg)
+
+    def trace(self) -> None:
+        """Everything that traces rays: the rounds (and subdivision), the components, the bounces,
+        and the irradiance per triangle (``self.ef``) and per vertex (``self.ev``)."""
         cfg = self.cfg
         levels = cfg.subdivide_levels if cfg.subdivide else 0
         rnd = 0
@@ -344,29 +344,53 @@ class Baker:
         self.finish_components()
         if self.plan.bounces:
             self.bounce()
-        ef = self.local_irradiance(self.F.val) + self.F.val["indirect"]
+        self.ef = self.local_irradiance(self.F.val) + self.F.val["indirect"]
         if self.vertex_mode:
-            ev = self.local_irradiance(self.V.val) + self.V.val["indirect"]
+            self.ev = self.local_irradiance(self.V.val) + self.V.val["indirect"]
         else:
-            ev = self.vertex_from_faces(ef)
+            self.ev = self.vertex_from_faces(self.ef)
+
+    def traced(self) -> dict:
+        """What :func:`coloured` turns into colours (after :meth:`trace`): none of it depends on
+        ``lighting.exposure`` or ``lighting.tonemap`` unless subdivision (which compares shown
+        colours) ran."""
         alb = self.albedo()
-        alb_lin = colmod.decode(alb[:, :3], cfg.color_space)
-        face_rgb = colmod.shade(alb_lin, ef, cfg.exposure, cfg.tonemap, cfg.color_space)
-        face_colors = np.concatenate([face_rgb, alb[:, 3:4]], axis=1)
-        v_alb = self.vertex_from_faces(np.concatenate([alb_lin, alb[:, 3:4]], axis=1))
-        if cfg.vertex_output == "light":
-            v_alb[:, :3] = 1.0
-        vert_rgb = colmod.shade(v_alb[:, :3], ev, cfg.exposure, cfg.tonemap, cfg.color_space)
-        used = self.used()
-        v_alpha = np.where(used, v_alb[:, 3], 1.0)
-        vertex_colors = np.concatenate([vert_rgb, v_alpha[:, None]], axis=1)
-        vertex_colors = np.clip(np.nan_to_num(vertex_colors, nan=0.0), 0.0, 1.0)
-        face_colors = np.clip(np.nan_to_num(face_colors, nan=0.0), 0.0, 1.0)
         res = LightingResult(
-            vertex_irradiance=ev, face_irradiance=ef, vertex_evaluated=self.v_done.copy(),
+            vertex_irradiance=self.ev, face_irradiance=self.ef, vertex_evaluated=self.v_done.copy(),
             face_sampled=self.f_done.copy(),
             vertex={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.V.val.items()},
             face={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.F.val.items()},
             vertex_se=dict(self.V.se), face_se=dict(self.F.se), albedo=alb.copy())
-        out = self.current_scene().replace(vertex_colors=vertex_colors, face_colors=face_colors)
-        return out.with_artefact("lighting", res)
+        return {"scene": self.current_scene(), "ef": self.ef, "ev": self.ev, "albedo": alb, "used": self.used(),
+                "area": self.area, "tris": self.tris, "n_vertices": len(self.pos), "result": res}
+
+
+def coloured(traced: dict, cfg: LightingConfig) -> Scene:
+    """The lit scene from :meth:`Baker.traced`: albedo x irradiance x exposure, tone map, encode,
+    per triangle and per vertex (area-weighted albedo of the triangles around it)."""
+    ef, ev, alb, used = traced["ef"], traced["ev"], traced["albedo"], traced["used"]
+    alb_lin = colmod.decode(alb[:, :3], cfg.color_space)
+    face_rgb = colmod.shade(alb_lin, ef, cfg.exposure, cfg.tonemap, cfg.color_space)
+    face_colors = np.concatenate([face_rgb, alb[:, 3:4]], axis=1)
+    v_alb = _vertex_from_faces(traced["tris"], traced["area"], traced["n_vertices"],
+                               np.concatenate([alb_lin, alb[:, 3:4]], axis=1))
+    if cfg.vertex_output == "light":
+        v_alb[:, :3] = 1.0
+    vert_rgb = colmod.shade(v_alb[:, :3], ev, cfg.exposure, cfg.tonemap, cfg.color_space)
+    v_alpha = np.where(used, v_alb[:, 3], 1.0)
+    vertex_colors = np.concatenate([vert_rgb, v_alpha[:, None]], axis=1)
+    vertex_colors = np.clip(np.nan_to_num(vertex_colors, nan=0.0), 0.0, 1.0)
+    face_colors = np.clip(np.nan_to_num(face_colors, nan=0.0), 0.0, 1.0)
+    out = traced["scene"].replace(vertex_colors=vertex_colors, face_colors=face_colors)
+    return out.with_artefact("lighting", traced["result"])
+
+
+def _vertex_from_faces(tris: np.ndarray, area: np.ndarray, V: int, face_vals: np.ndarray) -> np.ndarray:
+    """Per-vertex area-weighted mean of per-triangle values."""
+    w = np.repeat(area, 3)
+    flat = tris.ravel()
+    tot = np.bincount(flat, weights=w, minlength=V)
+    out = np.zeros((V, face_vals.shape[1]))
+    for c in range(face_vals.shape[1]):  # channels
+        out[:, c] = np.bincount(flat, weights=w * np.repeat(face_vals[:, c], 3), minlength=V)
+    return np.divide(out, tot[:, None], out=np.zeros_like(out), where=tot[:, None] > 0)

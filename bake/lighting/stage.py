@@ -24,6 +24,7 @@ warning, the effects ``light sources`` / ``all black`` and a record problem (``-
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -32,7 +33,7 @@ from ..colorspace import to_bytes
 from ..config import LightingConfig
 from ..record import StageRecord
 from ..scene import Scene
-from .baker import Baker
+from .baker import Baker, coloured
 from .kernel import EffectStats
 from .lightmap import bake_lightmap
 from .plan import Plan, check_config, make_plan
@@ -98,7 +99,7 @@ def _sources(plan: Plan, cfg: LightingConfig) -> tuple[bool, str]:
                    "black, lighting.ambient black and no AO-only bake")
 
 
-def _black(out: Scene, baker: Baker, cfg: LightingConfig, has_source: bool, what: str) -> str | None:
+def _black(out: Scene, albedo: np.ndarray, cfg: LightingConfig, has_source: bool, what: str) -> str | None:
     """A message when every colour the bake writes is black in 8 bits (``None`` otherwise)."""
     used = np.zeros(out.n_vertices, bool)
     used[np.asarray(out.triangles, np.int64).ravel()] = True
@@ -114,12 +115,36 @@ def _black(out: Scene, baker: Baker, cfg: LightingConfig, has_source: bool, what
         why = "lighting.exposure = 0"
     elif not (np.any(res.face_irradiance > 0) or np.any(res.vertex_irradiance > 0)):
         why = "no light reaches a surface (every light faces away, is out of range or is shadowed)"
-    elif not np.any(baker.albedo()[:, :3] > 0) and cfg.vertex_output == "color":
+    elif not np.any(albedo[:, :3] > 0) and cfg.vertex_output == "color":
         why = "every surface colour (albedo) is black"
     else:
         why = (f"the light is too dim to show in 8 bits (largest irradiance "
                f"{float(max(res.face_irradiance.max(), res.vertex_irradiance.max())):.3g})")
     return f"every lit colour is black: {why}"
+
+
+#: the keys that only the colour step reads (bake.lighting.baker.coloured), unless subdivision ran
+COLOUR_KEYS = ("exposure", "tonemap")
+
+
+def trace_key_parts(scene: Scene, cfg: LightingConfig) -> list | None:
+    """The key of a reusable trace: the input scene and every lighting key but the colour step's
+    (:data:`COLOUR_KEYS`). None when the trace depends on those too (``subdivide`` compares shown
+    colours) or the stage bakes a lightmap (its texels are coloured inside the trace)."""
+    if cfg.subdivide or cfg.target == "lightmap":
+        return None
+    from ..config import to_dict
+
+    section = to_dict(cfg)
+    for k in COLOUR_KEYS:
+        section.pop(k, None)
+    return ["lighting trace 1", section, scene]
+
+
+def _memo():
+    from ..cache import active_memo
+
+    return active_memo()
 
 
 def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, StageRecord]:
@@ -131,25 +156,43 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
                             "rays": 0, "seconds": 0.0})
         rec.seconds = time.perf_counter() - t0
         return scene, rec
-    plan = make_plan(scene, cfg)
-    baker = Baker(scene, cfg, plan, albedo)
-    out = baker.run()
-    rec.effects = _effect_order(plan, baker)
-    has_source, what = _sources(plan, cfg)
+    # A trace made for the same scene and keys but another exposure or tone map is reused (bake.cache.Memo)
+    memo = _memo() if albedo is None else None
+    parts = trace_key_parts(scene, cfg) if memo is not None else None
+    key = part = None
+    if parts is not None:
+        try:
+            key = memo.key("lighting", *parts)
+        except Exception as e:  # (a scene the entry format does not store: no reuse)
+            from ..cache import Unsupported
+
+            if not isinstance(e, Unsupported):
+                raise
+            key = None
+        part = memo.get("lighting", key) if key is not None else None
+        if part is not None and not _is_trace(part):
+            memo.forget("lighting", key, "does not hold a lighting trace")
+            part = None
+    reused = part is not None
+    baker = None
+    if part is None:
+        plan = make_plan(scene, cfg)
+        baker = Baker(scene, cfg, plan, albedo)
+        baker.trace()
+        part = _trace_part(plan, baker, cfg)
+        if key is not None:
+            memo.put("lighting", key, part)
+    out = coloured(part["traced"], cfg)
+    rec.effects = copy.deepcopy(part["effects"])
+    has_source, what = part["sources"]
     rec.effects.insert(0, {"name": "light sources", "ran": has_source, "reason": what, "rays": 0,
                            "seconds": 0.0})
-    black = _black(out, baker, cfg, has_source, what)
+    black = _black(out, part["traced"]["albedo"], cfg, has_source, what)
     if black is not None:  # loudly: a warning, an effect, and --strict fails the bake
         rec.effects.insert(1, {"name": "all black", "ran": True, "reason": black, "rays": 0, "seconds": 0.0})
         rec.warn(black)
         rec.problems.append(black)
-    if cfg.subdivide:
-        rec.effects.append({"name": "subdivide", "ran": baker.subdiv["added"] > 0, "rays": 0, "seconds": 0.0,
-                            "reason": baker.subdiv["stopped"], "rounds": baker.subdiv["rounds"],
-                            "triangles_added": baker.subdiv["added"]})
-    else:
-        rec.effects.append({"name": "subdivide", "ran": False, "rays": 0, "seconds": 0.0,
-                            "reason": "lighting.subdivide = false"})
+    rec.effects.append(copy.deepcopy(part["subdivide"]))
     lightmap_figs = None
     if cfg.target == "lightmap":
         # per-triangle colours above (a fallback for flat fillers), then every texel of the atlas
@@ -160,27 +203,63 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
                             "rays": int(sum(v["rays"] for v in lightmap_figs["rays"].values())),
                             "seconds": lightmap_figs["seconds"]})
         rec.accuracy["lightmap seam error (8-bit)"] = lightmap_figs["seam_error_8bit"]
-    for st in baker.stats.values():
-        for w in st.warnings:
+    for w in part["warnings"]:
+        rec.warn(w)
+    rec.accuracy.update(part["accuracy"])
+    if memo is not None:
+        for w in memo.take_warnings():
             rec.warn(w)
-        if st.ran and st.rays:
-            rec.accuracy[f"{st.name} error"] = st.error
-    timers = baker.ctx.timers.as_dict()
     rec.seconds = time.perf_counter() - t0
+    d = copy.deepcopy(part["details"])
+    if not reused:
+        d["timing"]["wall_seconds"] = round(rec.seconds, 6)
     rec.details = {
         "target": cfg.target,
         "lightmap": lightmap_figs,
-        "threads": default_threads(cfg.threads),
-        "points": {"vertices": int(baker.v_done.sum()), "triangles_with_interior_points": int(baker.f_done.sum())},
-        "rays": int(sum(st.rays for st in baker.stats.values())),
-        "timing": {"build_seconds": round(baker.ctx.build_seconds, 6), "thread_seconds": timers,
-                   "wall_seconds": round(rec.seconds, 6)},
-        "notes": list(plan.notes),
-        "ambient": [float(x) for x in plan.ambient],
+        **d,
         "color_pipeline": f"albedo ({cfg.color_space}) x irradiance x exposure {cfg.exposure:g}, "
                           f"tonemap {cfg.tonemap}, encode {cfg.color_space}",
         "samples": {"ao": effective_samples(cfg.ao.samples), "sky": effective_samples(cfg.sky.samples),
                     "shadows": effective_samples(cfg.shadows.samples),
                     "bounces": effective_samples(cfg.bounces.samples)},
+        "trace_reused": {"reused": reused, "traced_seconds": round(float(part["seconds"]), 6)},
     }
     return out, rec
+
+
+def _trace_part(plan: Plan, baker: Baker, cfg: LightingConfig) -> dict:
+    """What the stage needs of a trace besides the colours: :meth:`Baker.traced`, the effects,
+    warnings, error figures and details (none of which depends on :data:`COLOUR_KEYS` when the
+    trace is reusable)."""
+    t_start = baker.t_start
+    if cfg.subdivide:
+        sub = {"name": "subdivide", "ran": baker.subdiv["added"] > 0, "rays": 0, "seconds": 0.0,
+               "reason": baker.subdiv["stopped"], "rounds": baker.subdiv["rounds"],
+               "triangles_added": baker.subdiv["added"]}
+    else:
+        sub = {"name": "subdivide", "ran": False, "rays": 0, "seconds": 0.0, "reason": "lighting.subdivide = false"}
+    effects = _effect_order(plan, baker)  # (first: it marks the lights that ran and adds their warnings)
+    warnings, accuracy = [], {}
+    for st in baker.stats.values():
+        warnings.extend(st.warnings)
+        if st.ran and st.rays:
+            accuracy[f"{st.name} error"] = st.error
+    timers = baker.ctx.timers.as_dict()
+    seconds = time.perf_counter() - t_start
+    details = {
+        "threads": default_threads(cfg.threads),
+        "points": {"vertices": int(baker.v_done.sum()), "triangles_with_interior_points": int(baker.f_done.sum())},
+        "rays": int(sum(st.rays for st in baker.stats.values())),
+        "timing": {"build_seconds": round(baker.ctx.build_seconds, 6), "thread_seconds": timers,
+                   "wall_seconds": round(seconds, 6)},
+        "notes": list(plan.notes),
+        "ambient": [float(x) for x in plan.ambient],
+    }
+    return {"traced": baker.traced(), "effects": effects, "sources": _sources(plan, cfg),
+            "subdivide": sub, "warnings": warnings, "accuracy": accuracy, "details": details, "seconds": seconds}
+
+
+def _is_trace(part) -> bool:
+    keys = {"traced", "effects", "sources", "subdivide", "warnings", "accuracy", "details", "seconds"}
+    return isinstance(part, dict) and keys <= set(part) and isinstance(part["traced"], dict) and \
+        isinstance(part["traced"].get("scene"), Scene) and isinstance(part["effects"], list)

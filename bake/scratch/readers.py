@@ -512,10 +512,11 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     split = [
         r.set("_B", at(1)),
         B.if_(lt(bb, 0), [r.set("_front", 0), r.set("_B", sub(0, bb))], [r.set("_front", add(rr, 6))]),
-        B.if_(behind, [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 4))],
-              [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 2))]),
+        # g: the item of the coplanar range's count on the eye's side (its first is item g - 1)
+        B.if_(behind, [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 5))],
+              [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 3))]),
         B.if_(gt(nr, 0), [B.add_to(stack, nr)]),  # the near side is drawn last
-        B.if_(gt(item(add(g, 1), nodes), 0), [B.add_to(stack, sub(0, g))]),  # then the coplanar range
+        B.if_(gt(item(g, nodes), 0), [B.add_to(stack, sub(1, g))]),  # then the coplanar range
         B.if_(gt(nx, 0), [r.set("_r", nx)], pop()),  # the far side first, at once
     ]
     r.define("bsp walk", [], [

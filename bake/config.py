@@ -149,6 +149,9 @@ class BSPConfig:
     gap_planes: bool = True  # also try the most balanced axis-aligned plane that cuts nothing
     axis_planes: bool = False  # also try axis planes through the median
     merge_coplanar: bool = True  # merge coplanar neighbours into convex polygons first
+    # after the build, join coplanar neighbouring fragments drawn as one unit where the joint
+    # drops a corner a cut left on a straight line (bake/bsp/remerge.py)
+    remerge: bool = True
     epsilon: float = 1e-6  # on-plane tolerance, fraction of the bbox diagonal
     min_area: float = 1e-12  # smallest fragment, fraction of the diagonal squared
     plane_decimals: int = 6  # decimals kept in plane normals (offsets: 2 more digits)

@@ -162,6 +162,7 @@ def ablations(names, seeds=(0, 1, 2)) -> dict:
         "edge_planes = 128": dict(edge_planes=128),
         "best of 4 subtrees for nodes <= 128 faces (ensemble = 4)": dict(ensemble=4),
         "candidates = 16": dict(candidates=16),
+        "without re-merging fragments (remerge = false)": dict(remerge=False),
     }
     out = {}
     for label, kw in variants.items():

@@ -21,6 +21,7 @@ from ..scratch.numbers import format_numbers, json_array, project_json_bytes, ro
 from .cost import blocks_estimate, walk_counts
 from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
+from .remerge import remerge
 from .split import FaceStore, face_planes
 
 NODES_LIST = "bsp nodes"
@@ -88,7 +89,7 @@ def tolerance(scene: Scene, opt: BuildOptions) -> float:
     return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True):
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, remerge_fragments: bool = True):
     """Everything but writing the scene: (store, sources, tree, encoded, frame).
 
     With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
@@ -122,6 +123,10 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True):
     if scene.position_decimals is not None:
         store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
+    if remerge_fragments:
+        t = time.perf_counter()
+        tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], opt.epsilon, opt.min_area))
+        tree.stats["remerge_seconds"] = time.perf_counter() - t
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
     return store, src, tree, enc, (center, scale)
@@ -260,6 +265,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     T_in = scene.n_triangles
     opt = options(cfg)
     merge = bool(getattr(cfg, "merge_coplanar", True))
+    remerge_fragments = bool(getattr(cfg, "remerge", True))
     if T_in == 0:
         new = scene.with_list(ScratchList(NODES_LIST, np.zeros(0, np.int64), 0, _NODES_DOC, "int"))
         new = new.with_list(ScratchList(PLANES_LIST, np.zeros(0), 4, _PLANES_DOC, "number"))
@@ -268,7 +274,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         rec.warn("no triangles: empty BSP")
         rec.seconds = time.perf_counter() - t0
         return new, rec
-    store, src, tree, enc, (center, scale) = build(scene, opt, merge)
+    store, src, tree, enc, (center, scale) = build(scene, opt, merge, remerge_fragments)
     new, info = write_scene(scene, store, src, enc, center, scale)
     nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
     planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
@@ -291,6 +297,8 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     rec.details = {
         "inflation": round(T_out / T_in - 1.0, 6),
         "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
+        "remerged_fragments": st.get("remerged", 0), "remerge_saved_triangles": st.get("remerge_saved", 0),
+        "remerge_reverted_lists": st.get("remerge_reverted", 0),
         "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),
         "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
         "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],

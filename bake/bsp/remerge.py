@@ -61,8 +61,14 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
     kind = np.concatenate([np.full(len(x[0]), x[3], np.int64) for x in lists])
     seq = np.concatenate([np.arange(len(x[0])) for x in lists])  # place in its list (draw order)
     unit = np.unique(np.stack([kind, node, side], 1), axis=0, return_inverse=True)[1].ravel()
-    bucket = np.unique(np.stack([unit, src_group[store.src[ids]]], 1), axis=0, return_inverse=True)[1].ravel()
+    # only fragments with a partner of nearly the same normal in their unit and group can join:
+    # a cheap key (normal rounded to 0.02) finds them, the exact tests below decide
+    # (a coplanar group lies in its node's plane already)
+    nk = np.round(store.planes_of(ids)[:, :3] / 0.02).astype(np.int64) * (kind != 0)[:, None]
+    key = np.concatenate([unit[:, None], src_group[store.src[ids]][:, None], nk], 1)
+    bucket = np.unique(key, axis=0, return_inverse=True)[1].ravel()
     deg = store.degenerate_of(ids)
+    lonely = np.bincount(bucket)[bucket] < 2
     # working copies of every fragment (members: which original entries each stands for)
     F = len(ids)
     K = store.K
@@ -74,7 +80,7 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
     plane = store.planes_of(ids)
     place = seq.copy()
     member = np.arange(F)  # entry -> working fragment
-    alive = ~deg
+    alive = ~deg & ~lonely
     merged_any = np.zeros(F, bool)
     q = 1e9
     for _ in range(rounds):

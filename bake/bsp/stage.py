@@ -311,7 +311,8 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         "bytes_per_triangle": round((nodes_bytes + planes_bytes) / max(1, T_out), 3),
         "items_per_triangle": round((nodes_items + planes_items) / max(1, T_out), 4),
         "seconds": {"build": round(st["seconds"], 4), "leaf_tests": round(st["leaf_seconds"], 4),
-                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
+                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4),
+                    "remerge": round(st.get("remerge_seconds", 0.0), 4)},
         "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
     }
     rec.details["walk"] = typical_walk(new, enc)

@@ -66,8 +66,12 @@ class BuildOptions:
     edge_plane_cost: float = 0.3  # ... used only where their cuts add <= this many triangles per fragment
     score_sample: int = 512  # larger nodes pre-score candidates on this many fragments ...
     score_refine: int = 4  # ... and rescore their best few exactly
-    ensemble: int = 1  # nodes of at most ensemble_max fragments are built this many times ...
-    ensemble_max: int = 128  # ... and the cheapest subtree is kept (ensemble 1: off)
+    ensemble: int = 8  # nodes of at most ensemble_max fragments are built this many times ...
+    ensemble_max: int = 64  # ... and the cheapest subtree is kept (ensemble 1: off) ...
+    # the thorough search (ensembles, thorough_edge_factor x edge_planes) in scenes of at most
+    # thorough_faces source faces (0: never); bigger scenes are built greedily
+    thorough_faces: int = 8000
+    thorough_edge_factor: int = 2
     fragments: str = "polygons"  # "fans": triangulate every cut piece at once (for comparison)
 
 
@@ -867,8 +871,13 @@ def build_tree(store: FaceStore, opt: BuildOptions, center: np.ndarray | None = 
     """Build a tree over every fragment of ``store`` (normalised coordinates). ``center`` and
     ``scale`` map normalised to world coordinates (used to quantise plane offsets)."""
     t0 = time.perf_counter()
+    if store.n <= opt.thorough_faces:  # small: search harder
+        opt = dataclasses.replace(opt, edge_planes=opt.edge_planes * opt.thorough_edge_factor)
+    else:  # big: greedy everywhere
+        opt = dataclasses.replace(opt, ensemble=1)
     b = _Builder(store, opt, np.zeros(3) if center is None else np.asarray(center, np.float64), float(scale))
     b.run()
     tree = b.tree()
     tree.stats["seconds"] = time.perf_counter() - t0
+    tree.stats["thorough"] = bool(store.n <= opt.thorough_faces)
     return tree

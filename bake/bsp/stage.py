@@ -296,7 +296,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     rec.accuracy = {"inflation": T_out / T_in - 1.0}
     rec.details = {
         "inflation": round(T_out / T_in - 1.0, 6),
-        "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
+        "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged, "thorough_search": st.get("thorough", False),
         "remerged_fragments": st.get("remerged", 0), "remerge_saved_triangles": st.get("remerge_saved", 0),
         "remerge_reverted_lists": st.get("remerge_reverted", 0),
         "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),

@@ -32,7 +32,7 @@ from .split import MIN_COS_TILT, FaceStore
 CHECK_MAX = 512  # longest prefix/suffix list whose new order is checked (the check is O(m^2))
 
 
-def _turn_ok(pos, n, prev, mid, nxt, eps):
+def _turn_ok(n, prev, mid, nxt, eps):
     """At corner ``mid``: 1 strictly convex, 2 straight (within ``eps`` of the line prev-next, and
     between them), 0 reflex."""
     e1, e2 = mid - prev, nxt - mid
@@ -122,8 +122,8 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
         cp, cq = cnt[fp], cnt[fq]
         A_ = pos[fp, kp]
         B_ = pos[fp, (kp + 1) % cp]
-        ta = _turn_ok(pos, n, pos[fp, (kp - 1) % cp], A_, pos[fq, (kq + 2) % cq], eps)
-        tb = _turn_ok(pos, n, pos[fq, (kq - 1) % cq], B_, pos[fp, (kp + 2) % cp], eps)
+        ta = _turn_ok(n, pos[fp, (kp - 1) % cp], A_, pos[fq, (kq + 2) % cq], eps)
+        tb = _turn_ok(n, pos[fq, (kq - 1) % cq], B_, pos[fp, (kp + 2) % cp], eps)
         ok &= (ta > 0) & (tb > 0) & ((ta == 2) | (tb == 2))  # convex, and at least one corner goes
         if attr.shape[2]:
             ok &= _affine_ok(pos, attr, cnt, plane, fp, fq, 1e-6)

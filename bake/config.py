@@ -139,8 +139,13 @@ class BSPConfig:
     score_refine: int = 4
     # nodes of at most ensemble_max faces are built `ensemble` times from their best planes and the
     # subtree adding the fewest triangles is kept (1 = off)
-    ensemble: int = 1
-    ensemble_max: int = 128
+    ensemble: int = 8
+    ensemble_max: int = 64
+    # Scenes of at most thorough_faces faces (after coplanar merging) get the thorough search:
+    # the ensembles above and thorough_edge_factor times edge_planes per node; bigger scenes are
+    # built greedily (no ensembles, edge_planes) (0 = never thorough)
+    thorough_faces: int = 8000
+    thorough_edge_factor: int = 2
     seed: int = 0
     # Leaves: "priority" (sets drawn in a fixed order valid from every viewpoint, plus peeling),
     # "convex" (only sets in which no face can hide another), "none" (classic BSP).
@@ -149,6 +154,9 @@ class BSPConfig:
     gap_planes: bool = True  # also try the most balanced axis-aligned plane that cuts nothing
     axis_planes: bool = False  # also try axis planes through the median
     merge_coplanar: bool = True  # merge coplanar neighbours into convex polygons first
+    # after the build, join coplanar neighbouring fragments drawn as one unit where the joint
+    # drops a corner a cut left on a straight line (bake/bsp/remerge.py)
+    remerge: bool = True
     epsilon: float = 1e-6  # on-plane tolerance, fraction of the bbox diagonal
     min_area: float = 1e-12  # smallest fragment, fraction of the diagonal squared
     plane_decimals: int = 6  # decimals kept in plane normals (offsets: 2 more digits)
@@ -943,6 +951,8 @@ def validate(cfg: Config) -> None:
     need(cfg.bsp.score_refine >= 1, "bsp.score_refine", "must be >= 1")
     need(cfg.bsp.ensemble >= 1, "bsp.ensemble", "must be >= 1 (1 = off)")
     need(cfg.bsp.ensemble_max >= 0, "bsp.ensemble_max", "must be >= 0")
+    need(cfg.bsp.thorough_faces >= 0, "bsp.thorough_faces", "must be >= 0 (0 = never)")
+    need(cfg.bsp.thorough_edge_factor >= 1, "bsp.thorough_edge_factor", "must be >= 1")
     need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")

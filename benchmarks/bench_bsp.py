@@ -153,15 +153,18 @@ def ablations(names, seeds=(0, 1, 2)) -> dict:
     scenes = {k: load_scene(k) for k in names}
     grids = {k: s.replace(position_decimals=position_decimals(s.scale(), 5)) for k, s in scenes.items()}
     variants = {
-        "default (edge planes, sampled scoring, balance 0.5, grid)": {},
+        "default (edge planes, sampled scoring, balance 0.5, grid, thorough search, re-merge)": {},
         "without edge planes (edge_planes = 0)": dict(edge_planes=0),
         "edge planes at any cost (edge_plane_cost = 1e9)": dict(edge_plane_cost=1e9),
         "balance_weight 1.0 (the old default)": dict(balance_weight=1.0),
         "without the grid (tolerance epsilon = 1e-6 only)": {"_grid": False},
         "every candidate scored on every face (score_sample = 0)": dict(score_sample=0),
         "edge_planes = 128": dict(edge_planes=128),
-        "best of 4 subtrees for nodes <= 128 faces (ensemble = 4)": dict(ensemble=4),
+        "without best-of-8 subtrees (ensemble = 1)": dict(ensemble=1),
+        "without doubled edge planes (thorough_edge_factor = 1)": dict(thorough_edge_factor=1),
+        "greedy, as for big scenes (thorough_faces = 0)": dict(thorough_faces=0),
         "candidates = 16": dict(candidates=16),
+        "without re-merging fragments (remerge = false)": dict(remerge=False),
     }
     out = {}
     for label, kw in variants.items():

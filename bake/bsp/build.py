@@ -66,8 +66,12 @@ class BuildOptions:
     edge_plane_cost: float = 0.3  # ... used only where their cuts add <= this many triangles per fragment
     score_sample: int = 512  # larger nodes pre-score candidates on this many fragments ...
     score_refine: int = 4  # ... and rescore their best few exactly
-    ensemble: int = 1  # nodes of at most ensemble_max fragments are built this many times ...
-    ensemble_max: int = 128  # ... and the cheapest subtree is kept (ensemble 1: off)
+    ensemble: int = 8  # nodes of at most ensemble_max fragments are built this many times ...
+    ensemble_max: int = 64  # ... and the cheapest subtree is kept (ensemble 1: off) ...
+    # the thorough search (ensembles, thorough_edge_factor x edge_planes) in scenes of at most
+    # thorough_faces source faces (0: never); bigger scenes are built greedily
+    thorough_faces: int = 8000
+    thorough_edge_factor: int = 2
     fragments: str = "polygons"  # "fans": triangulate every cut piece at once (for comparison)
 
 
@@ -435,27 +439,38 @@ class _Builder:
             fc = cnt[f]
             # corners 0-2 of every fragment, further corners only where a fragment has them (the
             # padding repeats corner 0 and would change nothing)
+            nn = len(f)
+            d, tmp = np.empty(nn, np.float32), np.empty(nn, np.float32)
+            mn, mx = np.empty(nn, np.float32), np.empty(nn, np.float32)
+            on_c = np.zeros(nn, np.int8)
+            onb = np.empty(nn, bool)
             for k in range(K):
                 sel = None if k < 3 else np.flatnonzero(fc > k)
                 if sel is not None and len(sel) == 0:
                     break
                 ff = f if sel is None else f[sel]
                 q = Pc[:, k, ff]  # (3, n) one gather of the corner's coordinates
-                if sel is None:
-                    d = a * q[0] + b * q[1] + c * q[2] - w
+                if sel is None:  # in place: d = a*x + b*y + c*z - w
+                    np.multiply(a, q[0], out=d)
+                    np.multiply(b, q[1], out=tmp)
+                    d += tmp
+                    np.multiply(c, q[2], out=tmp)
+                    d += tmp
+                    d -= w
+                    np.abs(d, out=tmp)
+                    np.less_equal(tmp, eps, out=onb)
+                    if k == 0:
+                        mn[:] = d
+                        mx[:] = d
+                    else:
+                        np.minimum(mn, d, out=mn)
+                        np.maximum(mx, d, out=mx)
+                    on_c += onb
                 else:
-                    d = a[sel] * q[0] + b[sel] * q[1] + c[sel] * q[2] - w[sel]
-                on = np.abs(d) <= eps
-                if k == 0:
-                    mn, mx, on_c = d, d.copy(), on.astype(np.int8)
-                elif sel is None:
-                    np.minimum(mn, d, out=mn)
-                    np.maximum(mx, d, out=mx)
-                    on_c += on
-                else:
-                    mn[sel] = np.minimum(mn[sel], d)
-                    mx[sel] = np.maximum(mx[sel], d)
-                    on_c[sel] += on
+                    ds = a[sel] * q[0] + b[sel] * q[1] + c[sel] * q[2] - w[sel]
+                    mn[sel] = np.minimum(mn[sel], ds)
+                    mx[sel] = np.maximum(mx[sel], ds)
+                    on_c[sel] += np.abs(ds) <= eps
             has_b, has_f = mn < -eps, mx > eps
             dg = deg[f]
             if dg.any():  # degenerate fragments are never cut: they go with their middle
@@ -856,8 +871,13 @@ def build_tree(store: FaceStore, opt: BuildOptions, center: np.ndarray | None = 
     """Build a tree over every fragment of ``store`` (normalised coordinates). ``center`` and
     ``scale`` map normalised to world coordinates (used to quantise plane offsets)."""
     t0 = time.perf_counter()
+    if store.n <= opt.thorough_faces:  # small: search harder
+        opt = dataclasses.replace(opt, edge_planes=opt.edge_planes * opt.thorough_edge_factor)
+    else:  # big: greedy everywhere
+        opt = dataclasses.replace(opt, ensemble=1)
     b = _Builder(store, opt, np.zeros(3) if center is None else np.asarray(center, np.float64), float(scale))
     b.run()
     tree = b.tree()
     tree.stats["seconds"] = time.perf_counter() - t0
+    tree.stats["thorough"] = bool(store.n <= opt.thorough_faces)
     return tree

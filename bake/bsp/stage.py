@@ -22,6 +22,7 @@ from ..scratch.numbers import format_numbers, json_array, project_json_bytes, ro
 from .cost import blocks_estimate, walk_counts
 from .encode import NODES_DOC, Encoded, encode
 from .merge import SourceFaces, merge_coplanar
+from .remerge import remerge
 from .split import FaceStore, Tape, face_planes
 
 NODES_LIST = "bsp nodes"
@@ -89,7 +90,7 @@ def tolerance(scene: Scene, opt: BuildOptions) -> float:
     return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False):
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True):
     """Everything but writing the scene: (store, sources, tree, encoded, frame).
 
     With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
@@ -98,7 +99,9 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
     rounding collapses left out, and the on-plane tolerance at least a grid step.
 
     ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
-    from (:class:`bake.bsp.split.Tape`; the result is the same either way)."""
+    from (:class:`bake.bsp.split.Tape`; the result is the same either way: the corner ids it adds
+    decide neither a merge nor a re-merge). ``remerge_fragments``: join coplanar fragments drawn
+    together again (:func:`bake.bsp.remerge.remerge`)."""
     center, scale = frame(scene)
     opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
     src, two, ch = merged(scene, opt, merge, tape)
@@ -110,6 +113,12 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
     if scene.position_decimals is not None:
         store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
+    if remerge_fragments:
+        t = time.perf_counter()
+        shown = None if ch is None else np.arange(store.attr.shape[2]) != ch
+        tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], opt.epsilon, opt.min_area,
+                                  shown=shown))
+        tree.stats["remerge_seconds"] = time.perf_counter() - t
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
     return store, src, tree, enc, (center, scale)
@@ -305,7 +314,7 @@ def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tu
     return len(items), project_json_bytes(name, json_array(items))
 
 
-def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool) -> list:
+def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> list:
     """The key of a reusable tree: everything of the scene and options the tree and the split
     layout depend on except the colours. Positions and their grid, corners, materials (sidedness,
     textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and the merge
@@ -316,7 +325,8 @@ def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool) -> list:
     two_mat = np.array([m.double_sided for m in scene.materials], bool)
     two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
     mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
-    return ["bsp tree 1", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
+    return ["bsp tree 2", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
+            bool(remerge_fragments),
             scene.positions, scene.position_decimals, scene.triangles, scene.tri_material, mats,
             scene.tri_polygon, scene.tri_uvs, scene.tri_lightmap_uvs,
             None if scene.vertex_colors is None else list(scene.vertex_colors.shape),
@@ -332,12 +342,12 @@ def _canonical(labels: np.ndarray) -> np.ndarray:
     return rank[inv.ravel()]
 
 
-def make(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
+def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
     """Build the tree and the split layout: what :func:`finish` turns into the stage's scene and
     record, for these colours or others that give the same merge groups."""
     t0 = time.perf_counter()
     T_in = scene.n_triangles
-    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True)
+    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True, remerge_fragments=remerge_fragments)
     layout = split_layout(scene, store, src, enc, center, scale)
     recolour_state = None
     if store.tape is not None:
@@ -354,6 +364,9 @@ def make(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
     details = {
         "inflation": round(T_out / T_in - 1.0, 6),
         "splits": st["splits"], "kept_whole": st["kept_whole"], "merged_triangles": src.merged,
+        "thorough_search": st.get("thorough", False),
+        "remerged_fragments": st.get("remerged", 0), "remerge_saved_triangles": st.get("remerge_saved", 0),
+        "remerge_reverted_lists": st.get("remerge_reverted", 0),
         "source_faces": int(len(src.count)), "tree_nodes": tree.n_nodes, "tree_depth": int(tree.depth.max()),
         "records": enc.records, "record_depth": enc.max_depth, "stack_bound": stack_bound,
         "planes": int(len(enc.planes)), "plane_uses": enc.plane_uses, "peeled_fragments": st["peeled"],
@@ -366,7 +379,8 @@ def make(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
         "bytes_per_triangle": round((nodes_bytes + planes_bytes) / max(1, T_out), 3),
         "items_per_triangle": round((nodes_items + planes_items) / max(1, T_out), 4),
         "seconds": {"build": round(st["seconds"], 4), "leaf_tests": round(st["leaf_seconds"], 4),
-                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4)},
+                    "choose": round(st["choose_seconds"], 4), "split": round(st["split_seconds"], 4),
+                    "remerge": round(st.get("remerge_seconds", 0.0), 4)},
         "options": {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
     }
     details["walk"] = typical_walk(apply_layout(scene, layout), enc)
@@ -401,13 +415,17 @@ def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict |
     """``made`` (a :func:`make` for a scene that differed from this one only in its colours) for
     this scene's vertex colours, or None when they change a decision the build made with them:
     which coplanar faces merged (attributes must be affine over a merged face: merged again and
-    compared) or which cut corners became one vertex (a new vertex is one position and colour).
+    compared), which fragments the re-merge joined (the same test after the build: a tree with
+    any re-merged fragment is built again) or which cut corners became one vertex (a new vertex
+    is one position and colour).
     The cut corners' colours come from the tape, computed exactly as the build computes them, so
     the result is the bytes a build with these colours gives."""
     state = made["recolour"]
     layout = made["layout"]
     if scene.vertex_colors is None or state is None:
         return made if scene.vertex_colors is None and state is None else None
+    if made["details"].get("remerged_fragments", 0):
+        return None  # the re-merge joined fragments whose colours were affine over the union: built again
     src, _, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
     if ch is None or _merge_signature(src, scene) != state["merge"]:
         return None
@@ -458,6 +476,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     T_in = scene.n_triangles
     opt = options(cfg)
     merge = bool(getattr(cfg, "merge_coplanar", True))
+    remerge_fragments = bool(getattr(cfg, "remerge", True))
     if T_in == 0:
         new = scene.with_list(ScratchList(NODES_LIST, np.zeros(0, np.int64), 0, _NODES_DOC, "int"))
         new = new.with_list(ScratchList(PLANES_LIST, np.zeros(0), 4, _PLANES_DOC, "number"))
@@ -471,7 +490,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     memo = _memo()
     key = made = None
     if memo is not None:
-        key = memo.key("bsp", *tree_key_parts(scene, opt, merge))
+        key = memo.key("bsp", *tree_key_parts(scene, opt, merge, remerge_fragments))
         made = memo.get("bsp", key)
         if made is not None and not _is_made(made):
             memo.forget("bsp", key, "does not hold a BSP tree")
@@ -480,7 +499,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
             made = recolour(scene, opt, merge, made)
     reused = made is not None
     if made is None:
-        made = make(scene, opt, merge)
+        made = make(scene, opt, merge, remerge_fragments)
         if memo is not None:
             memo.put("bsp", key, made)
     new = finish(scene, made, rec)

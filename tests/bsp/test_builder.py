@@ -99,3 +99,20 @@ def test_sampled_scoring_is_exact_for_small_nodes():
     t2 = build_tree(st2, BuildOptions(score_sample=64))
     np.testing.assert_array_equal(t1.plane, t2.plane)
     np.testing.assert_array_equal(np.sort(t1.fragments()), np.sort(t2.fragments()))
+
+
+def test_the_thorough_search_only_in_scenes_up_to_thorough_faces():
+    from bake.bsp.stage import build, options
+
+    sc = interlocked_scene(seed=5)
+    small = options(_cfg(ensemble=3, ensemble_max=256, thorough_faces=100000))
+    big = options(_cfg(ensemble=3, ensemble_max=256, thorough_faces=10, thorough_edge_factor=3))
+    off = options(_cfg(ensemble=1, thorough_faces=0))
+    t_small = build(sc, small)[2]
+    t_big = build(sc, big)[2]
+    t_off = build(sc, off)[2]
+    assert t_small.stats["ensembles"] > 0
+    assert t_big.stats["ensembles"] == 0
+    # over the limit the tree is the greedy one, record for record
+    np.testing.assert_array_equal(t_big.plane, t_off.plane)
+    np.testing.assert_array_equal(t_big.pre_ids, t_off.pre_ids)

@@ -110,6 +110,7 @@ def test_a_reused_tree_gives_the_bytes_of_a_cold_build(lit):
     assert rec1.details["tree_reused"]["reused"] is False
     # the case worth testing: cuts made new vertices (their colours come from the tape), faces merged
     assert rec1.details["new_vertices"] > 0 and rec1.details["splits"] > 0 and rec1.details["merged_triangles"] > 0
+    assert rec1.details["remerged_fragments"] > 0  # and the re-merge joined fragments (checked again on reuse)
     # every colour darker by the same factor (an exposure change): the same merges and vertices
     vc = scene.vertex_colors.copy()
     vc[:, :3] *= 0.8
@@ -292,3 +293,23 @@ def test_a_trace_with_subdivision_is_not_reused(lit, tmp_path):
     assert _stage(rep, "lighting")["details"]["trace_reused"]["reused"] is False
     bake(cfg_path, tmp_path / "cold", "lighting.subdivide=true", "lighting.exposure=0.4", "cache.dir=\"none\"")
     assert outputs(out) == outputs(tmp_path / "cold")
+
+
+def test_the_remerge_check_fails_when_colours_break_a_join(lit):
+    """The re-merge joins coplanar fragments only where the vertex colours are affine over the
+    union; on reuse it runs again with the new colours (bsp.stage._remerged_again). Colours that
+    are no longer affine over a joined union must fail the check (and the tree is built again)."""
+    import dataclasses
+
+    from bake.bsp import stage as S
+
+    _, _, cfg, scene = lit
+    opt = S.options(cfg.bsp)
+    made = S.make(scene, opt, True, True)
+    state = made["recolour"]
+    assert "remerge" in state
+    src, _, _ = S.merged(scene, dataclasses.replace(opt, epsilon=S.tolerance(scene, opt)), True, tape=True)
+    corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
+    assert S._remerged_again(scene, opt, src, state, S.Tape.replay(state["tape"], corners))
+    noisy = corners + np.random.default_rng(3).random(corners.shape) * 0.5
+    assert not S._remerged_again(scene, opt, src, state, S.Tape.replay(state["tape"], noisy))

@@ -90,7 +90,8 @@ def tolerance(scene: Scene, opt: BuildOptions) -> float:
     return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True):
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True,
+          pre_remerge: list | None = None):
     """Everything but writing the scene: (store, sources, tree, encoded, frame).
 
     With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
@@ -101,7 +102,8 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
     ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
     from (:class:`bake.bsp.split.Tape`; the result is the same either way: the corner ids it adds
     decide neither a merge nor a re-merge). ``remerge_fragments``: join coplanar fragments drawn
-    together again (:func:`bake.bsp.remerge.remerge`)."""
+    together again (:func:`bake.bsp.remerge.remerge`); a list given as ``pre_remerge`` receives a
+    copy of ``(store, tree)`` as they were before it (:func:`recolour` runs it again on them)."""
     center, scale = frame(scene)
     opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
     src, two, ch = merged(scene, opt, merge, tape)
@@ -114,6 +116,8 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
         store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
     if remerge_fragments:
+        if pre_remerge is not None:
+            pre_remerge.append(_freeze(*copy.deepcopy((store, tree))))
         t = time.perf_counter()
         shown = None if ch is None else np.arange(store.attr.shape[2]) != ch
         tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], opt.epsilon, opt.min_area,
@@ -347,11 +351,15 @@ def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool =
     record, for these colours or others that give the same merge groups."""
     t0 = time.perf_counter()
     T_in = scene.n_triangles
-    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True, remerge_fragments=remerge_fragments)
+    pre: list = []
+    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True, remerge_fragments=remerge_fragments,
+                                                   pre_remerge=pre)
     layout = split_layout(scene, store, src, enc, center, scale)
     recolour_state = None
     if store.tape is not None:
         recolour_state = {"tape": store.tape.state(), "merge": _merge_signature(src, scene)}
+        if tree.stats.get("remerged", 0):  # the re-merge's joins depend on the vertex colours
+            recolour_state["remerge"] = {"pre": pre[0], "signature": _remerge_signature(store, tree, store.tape.ch)}
     nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
     planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
     stack_bound = 2 * enc.max_depth + 2
@@ -411,12 +419,60 @@ def _merge_signature(src: SourceFaces, scene: Scene) -> str:
     return content_digest(src.pos, src.count, src.vid, src.tri_start, src.tri_list, src.attr[..., chans])
 
 
+def _freeze(store: FaceStore, tree: Tree) -> dict:
+    """A store and its tree as plain arrays and numbers (what the stage cache's entries hold)."""
+    st = {k: v for k, v in vars(store).items() if k not in ("tape", "grid")}
+    st["grid"] = None if store.grid is None else [np.asarray(store.grid[0]), float(store.grid[1]), int(store.grid[2])]
+    return {"store": st, "tree": {f.name: getattr(tree, f.name) for f in dataclasses.fields(tree)
+                                  if f.name not in ("store", "stats")}}
+
+
+def _thaw(frozen: dict) -> tuple[FaceStore, Tree]:
+    """The store and tree of a :func:`_freeze` (new arrays: the frozen ones stay as they are)."""
+    frozen = copy.deepcopy(frozen)
+    store = object.__new__(FaceStore)
+    for k, v in frozen["store"].items():
+        setattr(store, k, v)
+    store.grid = None if frozen["store"]["grid"] is None else tuple(frozen["store"]["grid"])
+    store.tape = None
+    return store, Tree(store=store, stats={}, **frozen["tree"])
+
+
+def _remerge_signature(store: FaceStore, tree: Tree, ch: int) -> str:
+    """A digest of the fragments a tree draws after the re-merge (the lists, and each fragment's
+    corners with their positions, vertex numbers and tape ids in channel ``ch``), without the
+    colours: the same joins, the same signature."""
+    from ..cache import content_digest
+
+    n = store.n
+    ids = store.attr[:n, :, ch]
+    lists = [getattr(tree, f.name) for f in dataclasses.fields(tree) if f.name not in ("store", "stats")]
+    return content_digest(n, *lists, store.count[:n], store.vid[:n], store.src[:n], store.pos[:n], ids)
+
+
+def _remerged_again(scene: Scene, opt: BuildOptions, src: SourceFaces, state: dict, vals: np.ndarray) -> bool:
+    """Does the re-merge, run again on the tree as it was before it with this scene's vertex
+    colours (``vals``: every tape id's colour, computed as the build computes it), join exactly
+    the fragments it joined before?"""
+    store, tree = _thaw(state["remerge"]["pre"])
+    ch = int(state["tape"]["ch"])
+    _, layout = _attributes(scene)
+    ids = store.attr[:, :, ch].astype(np.int64)
+    store.attr[:, :, layout["vertex_color"]] = vals[np.clip(ids, 0, len(vals) - 1)]
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    first_tri = src.tri_list[src.tri_start[:-1]]
+    eps = tolerance(scene, opt)
+    remerge(store, tree, _groups(scene, two)[first_tri], eps, opt.min_area, shown=np.arange(store.A) != ch)
+    return _remerge_signature(store, tree, ch) == state["remerge"]["signature"]
+
+
 def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict | None:
     """``made`` (a :func:`make` for a scene that differed from this one only in its colours) for
     this scene's vertex colours, or None when they change a decision the build made with them:
     which coplanar faces merged (attributes must be affine over a merged face: merged again and
-    compared), which fragments the re-merge joined (the same test after the build: a tree with
-    any re-merged fragment is built again) or which cut corners became one vertex (a new vertex
+    compared), which fragments the re-merge joined (run again on the tree as it was before it,
+    with these colours, and compared) or which cut corners became one vertex (a new vertex
     is one position and colour).
     The cut corners' colours come from the tape, computed exactly as the build computes them, so
     the result is the bytes a build with these colours gives."""
@@ -424,8 +480,6 @@ def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict |
     layout = made["layout"]
     if scene.vertex_colors is None or state is None:
         return made if scene.vertex_colors is None and state is None else None
-    if made["details"].get("remerged_fragments", 0):
-        return None  # the re-merge joined fragments whose colours were affine over the union: built again
     src, _, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
     if ch is None or _merge_signature(src, scene) != state["merge"]:
         return None
@@ -433,8 +487,10 @@ def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict |
     rp = layout["replay"]
     n_new = int(layout["new_vertices"])
     vcol = scene.vertex_colors
+    vals = Tape.replay(state["tape"], corners)
+    if "remerge" in state and not _remerged_again(scene, opt, src, state, vals):
+        return None
     if n_new:
-        vals = Tape.replay(state["tape"], corners)
         key = np.concatenate([rp["pos"], vals[rp["ids"]]], 1)
         uniq, inv = np.unique(key, axis=0, return_inverse=True)
         if len(uniq) != n_new or not np.array_equal(inv.ravel(), rp["inv"]):

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .simplify_error import SurfaceIndex, _verify
+from .simplify_error import SurfaceIndex, _pair_dist2, _verify
 
 __all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "hausdorff"]
 
@@ -60,6 +60,12 @@ ROUNDS = 12
 MIN_LEVEL_SIMPLIFIED = 1
 # separate places where the distance peaks, kept for the stage's repairs
 PEAKS = 64
+# cells are cut only where they may hold a distance above this share of the largest measured so
+# far (a proven bound, see directed()): the maximum is unchanged, and so is every distance the
+# stage's repairs and peak rounds look at (within 80% of the maximum)
+KEEP_SHARE = 0.8
+# points made exact per round for that bound
+_LB_POINTS = 64
 
 
 @dataclass
@@ -256,12 +262,14 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
-             verify: bool = True, straddling: bool = False) -> Directed:
+             verify: bool = True, straddling: bool = False, per_triangle: bool = False) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring. With ``straddling``, every cell whose corners are closest to different
     triangles of Y is cut once before the refinement (the distance to one triangle is convex
     over a cell, largest at a corner; only where the closest triangle changes can it peak
-    inside)."""
+    inside). Cells are cut only where they may hold a distance above KEEP_SHARE of the
+    largest measured so far (``per_triangle``: on the same triangle of X, for the stage's local
+    repairs, which compare triangles one by one)."""
     P = grid.P
     if len(P) == 0 or index_y.tree is None:
         inf = 0.0 if len(P) == 0 else float("inf")
@@ -312,9 +320,53 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         st["ctri"] = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
         return n_pts + np.arange(len(new))
 
+    def can_rise(sel: np.ndarray) -> np.ndarray:
+        """The cells ``sel`` that may hold a distance above KEEP_SHARE of the largest measured
+        so far. The distance to one triangle is convex, so over a cell it is at most its
+        largest value at the cell's corners; the distance to Y is at most that to any one
+        triangle: a cell is bounded by min over its corners' closest triangles T of max over
+        its corners of the distance to T (exact point-triangle distances)."""
+        if len(sel) == 0:
+            return sel
+        c = st["cells"][sel]
+        near_c = st["N"][c]
+        allP = st["P"]
+        bound = np.full(len(sel), np.inf)
+        for j in range(3):
+            cols = np.take(index_y.table, np.maximum(near_c[:, j], 0), axis=1)
+            m = np.zeros(len(sel))
+            for i in range(3):
+                m = np.maximum(m, _pair_dist2(allP[c[:, i]], cols))
+            m[near_c[:, j] < 0] = np.inf
+            bound = np.minimum(bound, m)
+        if per_triangle:
+            # upper bounds compared with upper bounds: a triangle's largest bound stays above
+            # every distance in the cells left out
+            top = np.zeros(max(int(st["ctri"].max()), int(st["T"].max())) + 1)
+            np.maximum.at(top, st["T"], st["D"])
+            return sel[np.sqrt(bound) > KEEP_SHARE * top[st["ctri"][sel]]]
+        # the distances are upper bounds (some far above the truth): the share is taken of
+        # the largest distance made exact so far, a lower bound of the maximum
+        return sel[np.sqrt(bound) > KEEP_SHARE * st["lb"]]
+
+    def raise_lb(ids: np.ndarray) -> None:
+        """Make the largest bounds among the points ``ids`` exact (a few, in place) and raise
+        the lower bound of the maximum with them."""
+        D = st["D"]
+        ids = ids[D[ids] > st["lb"]]
+        if len(ids) == 0:
+            return
+        if len(ids) > _LB_POINTS:
+            ids = ids[np.argpartition(-D[ids], _LB_POINTS - 1)[:_LB_POINTS]]
+        D[ids], _ = index_y.exact(st["P"][ids], D[ids])
+        st["lb"] = max(st["lb"], float(D[ids].max()))
+
+    st["lb"] = 0.0
+    if not per_triangle:
+        raise_lb(np.arange(len(P)))
     if straddling:
         N = st["N"][st["cells"]]
-        split(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2])))
+        split(can_rise(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2]))))
     apart = grid.spacing
     pool = np.arange(len(st["P"]))  # where the next seeds are looked for: the last seeds and new points
     for r in range(rounds):
@@ -323,10 +375,12 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         top = pool[_distinct_top(allP[pool], allD[pool], max(seeds >> (r // 2), min(seeds, 32)), apart)]
         hot = np.zeros(len(allP), bool)
         hot[top] = True
-        sel = np.flatnonzero(hot[st["cells"]].any(axis=1))
+        sel = can_rise(np.flatnonzero(hot[st["cells"]].any(axis=1)))
         if len(sel) == 0:
             break
         pool = np.concatenate([top, split(sel)])
+        if not per_triangle:
+            raise_lb(pool)
     allP, D, allT, allN = st["P"], st["D"].copy(), st["T"], st["N"]
     n_pts = len(allP)
     if verify:
@@ -370,7 +424,8 @@ class HausdorffResult:
 
 def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, points: int = 20000,
               index_a: SurfaceIndex | None = None, grid_a: SurfaceGrid | None = None,
-              index_b: SurfaceIndex | None = None, seeds: int = SEEDS, rounds: int = ROUNDS) -> HausdorffResult:
+              index_b: SurfaceIndex | None = None, seeds: int = SEEDS, rounds: int = ROUNDS,
+              straddling: bool = True) -> HausdorffResult:
     """Symmetric Hausdorff distance between surface A (original) and B (simplified), each
     direction on a grid of about ``points`` points refined around its peaks."""
     Fa = np.asarray(Fa, np.int64).reshape(-1, 3)
@@ -384,7 +439,7 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     gb = surface_grid(Vb, Fb, points, min_level=MIN_LEVEL_SIMPLIFIED)
     # the original's side is cheap to measure (the simplified mesh is small): its cells that
     # straddle two triangles of the simplified mesh are cut once, and four times the seeds
-    ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=True)
+    ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=straddling)
     ba = directed(ia, gb, seeds=seeds, rounds=rounds)
     worst = ab.worst if ab.max >= ba.max else ba.worst
     return HausdorffResult(max=max(ab.max, ba.max), mean=0.5 * (ab.mean + ba.mean), max_a_to_b=ab.max,

@@ -4,6 +4,7 @@ vertex order, with the stage's seconds next to the bare library call's, side by 
     .venv/bin/python benchmarks/bench_simplify.py [--models bunny,spot,teapot,boolean]
         [--ratios 0.5,0.1,0.02,0.01] [--orderings given,right,shuffle1,...,shuffle5]
         [--before GIT_REF] [--no-methods] [--no-sweep] [--no-speed] [--out benchmarks/results/simplify.json]
+    .venv/bin/python benchmarks/bench_simplify.py --models "" --no-methods --no-sweep --before main   # speed rows only
     .venv/bin/python benchmarks/bench_simplify.py --derive benchmarks/results/simplify.json
 
 Rows (``rows`` in the JSON; issue 19's table): model x ratio x ordering with the default stage
@@ -282,14 +283,14 @@ def main(argv: list[str] | None = None) -> int:
         derive(res)
         Path(args.derive).write_text(json.dumps(res, indent=1) + "\n")
         return 0
-    ratios = [float(r) for r in args.ratios.split(",")]
+    ratios = [float(r) for r in args.ratios.split(",") if r]
     t_all = time.perf_counter()
     load_start = os.getloadavg()
     tmp = Path(tempfile.mkdtemp(prefix="bench-simplify-"))
     before = Before(args.before, tmp) if args.before else None
     rows, speed, methods, sweep = [], [], [], []
 
-    for model in args.models.split(","):
+    for model in filter(None, args.models.split(",")):  # --models "" runs no accuracy rows
         orderings = args.orderings.split(",") if model == "bunny" else ["given"]
         for ordering in orderings:
             path, ov = variant(model, ordering, tmp)

@@ -674,7 +674,7 @@ class _Tracker:
             return
         g = surface_grid(V, F[changed], 0, spacing=self.spacing)
         d = directed(self.ctx.index_a, g, seeds=max(8, min(64, 2 * len(changed))), rounds=8, verify=False,
-                     per_triangle=True)
+                     prune=False)
         tm = np.zeros(len(changed))
         if d.tri_max is not None:
             tm[:len(d.tri_max)] = d.tri_max
@@ -1437,8 +1437,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
                         f"inside every triangle), refined {_measure_mod.ROUNDS} times around up to "
                         f"{_measure_mod.SEEDS} of the largest distances at separate places "
-                        f"({4 * _measure_mod.SEEDS} on the original's side), the largest made exact at their "
-                        "points (bake/mesh/simplify_measure.py); a sampled maximum; fractions of the bbox diagonal",
+                        f"({4 * _measure_mod.SEEDS} on the original's side), only cells that may hold more than "
+                        f"{_measure_mod.KEEP_SHARE:.0%} of the largest exact distance so far (a convexity bound), "
+                        "the largest made exact at their points (bake/mesh/simplify_measure.py); a sampled "
+                        "maximum; fractions of the bbox diagonal",
         "hausdorff_max_exact": False if h is not None else None,
         "worst_point": None if h is None else [float(x) for x in h.worst_point],
         "worst_point_original_to_simplified": None if h is None or h.a_to_b is None else

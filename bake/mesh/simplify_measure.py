@@ -22,6 +22,16 @@ cell that has one of them as a corner is cut into four (edge midpoints, again sh
 between neighbours), and the new points are measured. Each round halves the spacing where the
 distance peaks, so after 8 rounds the worst places are sampled 256 times finer than the rest.
 
+A cell is cut only if it may hold a distance above ``KEEP_SHARE`` (80%) of the largest distance
+made exact so far. The bound is proven: the distance to one triangle is convex, so over a cell
+it is at most its largest value at the cell's corners, and the distance to Y is at most the
+distance to any one of its triangles; a cell's bound is the smallest, over the triangles of Y
+closest to its corners, of the largest corner distance to that triangle. Cells left uncut hold
+no point above 80% of the reported maximum, so what the stage's repairs and peak rounds look
+at (distances within 80% of the maximum) is sampled as densely as before; the cut cells are
+fewer (the bunny to 2,000 triangles: about 30,000 new points instead of 100,000 on the
+original's side).
+
 Distances
 ---------
 Every point's distance to Y comes from :class:`~bake.mesh.simplify_error.SurfaceIndex` (exact
@@ -262,14 +272,14 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
-             verify: bool = True, straddling: bool = False, per_triangle: bool = False) -> Directed:
+             verify: bool = True, straddling: bool = False, prune: bool = True) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring. With ``straddling``, every cell whose corners are closest to different
     triangles of Y is cut once before the refinement (the distance to one triangle is convex
     over a cell, largest at a corner; only where the closest triangle changes can it peak
-    inside). Cells are cut only where they may hold a distance above KEEP_SHARE of the
-    largest measured so far (``per_triangle``: on the same triangle of X, for the stage's local
-    repairs, which compare triangles one by one)."""
+    inside). With ``prune``, cells are cut only where they may hold a distance above
+    KEEP_SHARE of the largest distance made exact so far (the stage's local repairs, which
+    compare small patches triangle by triangle, cut every cell around their seeds)."""
     P = grid.P
     if len(P) == 0 or index_y.tree is None:
         inf = 0.0 if len(P) == 0 else float("inf")
@@ -321,12 +331,12 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         return n_pts + np.arange(len(new))
 
     def can_rise(sel: np.ndarray) -> np.ndarray:
-        """The cells ``sel`` that may hold a distance above KEEP_SHARE of the largest measured
-        so far. The distance to one triangle is convex, so over a cell it is at most its
+        """The cells ``sel`` that may hold a distance above KEEP_SHARE of the largest distance
+        made exact so far. The distance to one triangle is convex, so over a cell it is at most its
         largest value at the cell's corners; the distance to Y is at most that to any one
         triangle: a cell is bounded by min over its corners' closest triangles T of max over
         its corners of the distance to T (exact point-triangle distances)."""
-        if len(sel) == 0:
+        if len(sel) == 0 or not prune:
             return sel
         c = st["cells"][sel]
         near_c = st["N"][c]
@@ -339,12 +349,6 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
                 m = np.maximum(m, _pair_dist2(allP[c[:, i]], cols))
             m[near_c[:, j] < 0] = np.inf
             bound = np.minimum(bound, m)
-        if per_triangle:
-            # upper bounds compared with upper bounds: a triangle's largest bound stays above
-            # every distance in the cells left out
-            top = np.zeros(max(int(st["ctri"].max()), int(st["T"].max())) + 1)
-            np.maximum.at(top, st["T"], st["D"])
-            return sel[np.sqrt(bound) > KEEP_SHARE * top[st["ctri"][sel]]]
         # the distances are upper bounds (some far above the truth): the share is taken of
         # the largest distance made exact so far, a lower bound of the maximum
         return sel[np.sqrt(bound) > KEEP_SHARE * st["lb"]]
@@ -362,7 +366,7 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         st["lb"] = max(st["lb"], float(D[ids].max()))
 
     st["lb"] = 0.0
-    if not per_triangle:
+    if prune:
         raise_lb(np.arange(len(P)))
     if straddling:
         N = st["N"][st["cells"]]
@@ -379,7 +383,7 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         if len(sel) == 0:
             break
         pool = np.concatenate([top, split(sel)])
-        if not per_triangle:
+        if prune:
             raise_lb(pool)
     allP, D, allT, allN = st["P"], st["D"].copy(), st["T"], st["N"]
     n_pts = len(allP)

@@ -225,7 +225,7 @@ class LocalError:
                 from .simplify_measure import directed, surface_grid
                 g = surface_grid(C[own].reshape(-1, 3), np.arange(3 * len(own)).reshape(-1, 3), 0,
                                  spacing=self.spacing)
-                dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False, per_triangle=True)
+                dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False, prune=False)
                 per = np.maximum(per, dd.tri_max[:len(own)] if len(dd.tri_max) >= len(own) else
                                  np.pad(dd.tri_max, (0, len(own) - len(dd.tri_max))))
             np.maximum.at(out, patch[own], per)

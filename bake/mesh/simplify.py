@@ -1435,7 +1435,9 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "error_samples": int(cfg.error_samples) if sample is not None else 0,
         "error_sample": sample,
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
-                        f"inside every triangle), refined {_measure_mod.ROUNDS} times around up to "
+                        f"inside every triangle; on the simplified one {_measure_mod.POINTS_PER_SIMPLIFIED} per "
+                        "triangle where that is more, at most 4 x error_samples), refined "
+                        f"{_measure_mod.ROUNDS} times around up to "
                         f"{_measure_mod.SEEDS} of the largest distances at separate places "
                         f"({4 * _measure_mod.SEEDS} on the original's side), only cells that may hold more than "
                         f"{_measure_mod.KEEP_SHARE:.0%} of the largest exact distance so far (a convexity bound), "

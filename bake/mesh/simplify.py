@@ -112,8 +112,9 @@ _PEAK_LOCKS = 8
 # The least-squares fit pairs at most this many of the input's points with the result (and a
 # third as many random points of the result with the input).
 _FIT_POINTS = 60000
-# Refinement rounds of the quick measure that checks whether the fit made the result worse.
-_FIT_CHECK_ROUNDS = 3
+# Refinement rounds of the quick measure that checks whether the fit made the result worse (0:
+# the grids alone, a subset of the full measure's points, so a lower bound of its max).
+_FIT_CHECK_ROUNDS = 0
 # The fit lowers the mean distance and may raise a peak a little, which the refine rounds then
 # work on (the bunny's orderings: up to 10% higher before the rounds, lower after them); a fit
 # that raises the measured max by more than this factor is not kept (CSG corners: 10x).
@@ -672,7 +673,8 @@ class _Tracker:
         if len(changed) == 0:
             return
         g = surface_grid(V, F[changed], 0, spacing=self.spacing)
-        d = directed(self.ctx.index_a, g, seeds=max(8, min(64, 2 * len(changed))), rounds=8, verify=False)
+        d = directed(self.ctx.index_a, g, seeds=max(8, min(64, 2 * len(changed))), rounds=8, verify=False,
+                     prune=False)
         tm = np.zeros(len(changed))
         if d.tri_max is not None:
             tm[:len(d.tri_max)] = d.tri_max
@@ -1262,9 +1264,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         measure of the result; the fit is kept only if its measured max is not above
         _FIT_TOLERANCE times the unfitted result's. A least-squares fit pulls sharp CSG/CAD
         corners off their places (boolean.glb at 50%: 0.96% of the diagonal with it, 0.09%
-        without), so the unfitted result is measured too: first with _FIT_CHECK_ROUNDS
-        refinement rounds (a subset of the full measure's points, so its max can only be lower
-        than the full one), in full only if that does not already settle it."""
+        without), so the unfitted result is measured too: first on the two grids alone
+        (_FIT_CHECK_ROUNDS refinement rounds, no cut cells: a subset of the full measure's
+        points, so its max can only be lower than the full one), in full only if that does not
+        already settle it."""
         o1 = _fit(ctx, out)
         if not measuring:
             return o1, None
@@ -1276,7 +1279,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         else:
             t = time.perf_counter()
             hl = hausdorff(prep.V, prep.F, out.V, out.F, points=cfg.error_samples, index_a=index_a, grid_a=grid_a,
-                           rounds=_FIT_CHECK_ROUNDS)
+                           rounds=_FIT_CHECK_ROUNDS, straddling=False)
             ctx.measures += 1
             ctx.measure_seconds += time.perf_counter() - t
         check = {"max_with_fit": float(h1.max / scale), "max_without_fit_at_least": float(hl.max / scale)}
@@ -1432,10 +1435,14 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "error_samples": int(cfg.error_samples) if sample is not None else 0,
         "error_sample": sample,
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
-                        f"inside every triangle), refined {_measure_mod.ROUNDS} times around up to "
+                        f"inside every triangle; on the simplified one {_measure_mod.POINTS_PER_SIMPLIFIED} per "
+                        "triangle where that is more, at most 4 x error_samples), refined "
+                        f"{_measure_mod.ROUNDS} times around up to "
                         f"{_measure_mod.SEEDS} of the largest distances at separate places "
-                        f"({4 * _measure_mod.SEEDS} on the original's side), the largest made exact at their "
-                        "points (bake/mesh/simplify_measure.py); a sampled maximum; fractions of the bbox diagonal",
+                        f"({4 * _measure_mod.SEEDS} on the original's side), only cells that may hold more than "
+                        f"{_measure_mod.KEEP_SHARE:.0%} of the largest exact distance so far (a convexity bound), "
+                        "the largest made exact at their points (bake/mesh/simplify_measure.py); a sampled "
+                        "maximum; fractions of the bbox diagonal",
         "hausdorff_max_exact": False if h is not None else None,
         "worst_point": None if h is None else [float(x) for x in h.worst_point],
         "worst_point_original_to_simplified": None if h is None or h.a_to_b is None else

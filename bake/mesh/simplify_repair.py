@@ -225,7 +225,7 @@ class LocalError:
                 from .simplify_measure import directed, surface_grid
                 g = surface_grid(C[own].reshape(-1, 3), np.arange(3 * len(own)).reshape(-1, 3), 0,
                                  spacing=self.spacing)
-                dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False)
+                dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False, prune=False)
                 per = np.maximum(per, dd.tri_max[:len(own)] if len(dd.tri_max) >= len(own) else
                                  np.pad(dd.tri_max, (0, len(own) - len(dd.tri_max))))
             np.maximum.at(out, patch[own], per)
@@ -544,8 +544,11 @@ def _polish_batch(V, F, batch, corner_order, start, le: LocalError, iterations: 
     for _ in range(iterations):
         A = np.zeros((nb, 3, 3))
         b = np.zeros((nb, 3))
-        np.add.at(A, rows_v, weight[:, None, None] * g[:, :, None] * g[:, None, :])
-        np.add.at(b, rows_v, -(weight * h)[:, None] * g)
+        wg = weight[:, None] * g
+        for i in range(3):
+            b[:, i] = np.bincount(rows_v, weights=-(weight * h) * g[:, i], minlength=nb)
+            for j in range(i, 3):
+                A[:, i, j] = A[:, j, i] = np.bincount(rows_v, weights=wg[:, i] * g[:, j], minlength=nb)
         tot = np.bincount(rows_v, weights=weight, minlength=nb)
         reg = lam * np.maximum(tot, 1e-300)[:, None, None] * np.eye(3)
         A += reg

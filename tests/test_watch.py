@@ -36,6 +36,7 @@ class Proc:
                                   env=env)
         self.q: queue.Queue = queue.Queue()
         self.lines: list[tuple[str, str]] = []
+        self.seen: dict[str, int] = {}  # per stream: lines up to here were matched or passed over
         self.threads = [threading.Thread(target=self._pump, args=(name, stream), daemon=True)
                         for name, stream in (("out", self.p.stdout), ("err", self.p.stderr))]
         for t in self.threads:
@@ -46,6 +47,15 @@ class Proc:
             self.q.put((name, line.rstrip("\n")))
 
     def expect(self, pattern: str, stream: str = "out", timeout: float = TIMEOUT) -> str:
+        """The next line of ``stream`` that matches, after the last one this returned for that
+        stream (stdout and stderr interleave freely: a line of one that arrived while waiting for
+        the other is still found)."""
+        seen = self.seen.get(stream, 0)
+        for k in range(seen, len(self.lines)):
+            name, line = self.lines[k]
+            if name == stream and re.search(pattern, line):
+                self.seen[stream] = k + 1
+                return line
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
@@ -55,6 +65,7 @@ class Proc:
                 continue
             self.lines.append((name, line))
             if name == stream and re.search(pattern, line):
+                self.seen[stream] = len(self.lines)
                 return line
         raise AssertionError(f"no {pattern!r} on {stream} within {timeout} s: {self.lines}")
 

@@ -102,19 +102,7 @@ def merge_coplanar(pos_n: np.ndarray, tris: np.ndarray, attr: np.ndarray, group:
         if len(fp) == 0:
             break
         # mutual best proposals: each face proposes its longest mergeable edge
-        length = np.linalg.norm(cur_pos[fp, kp] - cur_pos[fp, (kp + 1) % cnt[fp]], axis=1)
-        cand_f = np.concatenate([fp, fq])
-        cand_g = np.concatenate([fq, fp])
-        cand_l = np.concatenate([length, length])
-        cand_e = np.concatenate([np.arange(len(fp)), np.arange(len(fp))])
-        oo = np.lexsort((cand_g, -cand_l, cand_f))
-        firsts = np.ones(len(oo), bool)
-        firsts[1:] = cand_f[oo][1:] != cand_f[oo][:-1]
-        best_partner = np.full(F, -1, np.int64)
-        best_edge = np.full(F, -1, np.int64)
-        best_partner[cand_f[oo][firsts]] = cand_g[oo][firsts]
-        best_edge[cand_f[oo][firsts]] = cand_e[oo][firsts]
-        mutual = (best_partner[fp] == fq) & (best_partner[fq] == fp) & (best_edge[fp] == np.arange(len(fp)))
+        mutual = mutual_proposals(cur_pos, cnt, fp, kp, fq, F)
         fp, fq, kp, kq = fp[mutual], fq[mutual], kp[mutual], kq[mutual]
         if len(fp) == 0:
             break
@@ -124,6 +112,37 @@ def merge_coplanar(pos_n: np.ndarray, tris: np.ndarray, attr: np.ndarray, group:
         cur_attr, cur_chk = both[..., :A], both[..., A:]
         merged_total += len(fp)
     return _as_sources(cur_pos, cnt, cur_attr, vid, owner, merged_total)
+
+
+def union_slots(fp, kp, fq, kq, cp, cq, K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The corners of the unions of faces p and q joined along p's edge kp (a -> b), which is q's
+    edge kq (b -> a): p's from b (kp + 1) round to a (cp of them), then q's after a (kq + 2) up to
+    before b (cq - 2). Returns the slot numbers (1, K) and, per union and slot, the face and the
+    corner it comes from (slots past cp + cq - 2 hold leftovers for the caller to mask)."""
+    t = np.arange(K)[None, :]
+    from_p = t < cp[:, None]
+    ip = (kp[:, None] + 1 + t) % cp[:, None]
+    iq = (kq[:, None] + 2 + (t - cp[:, None])) % cq[:, None]
+    return t, np.where(from_p, fp[:, None], fq[:, None]), np.where(from_p, ip, iq)
+
+
+def mutual_proposals(pos, cnt, fp, kp, fq, n_faces: int) -> np.ndarray:
+    """Which candidate joints (p's edge kp shared with face q) to make in one round, at most one
+    per face: every face proposes its longest candidate edge (ties: the lower partner), and a
+    joint is made when both faces propose it. Returns a mask over the candidates."""
+    length = np.linalg.norm(pos[fp, kp] - pos[fp, (kp + 1) % cnt[fp]], axis=1)
+    cand_f = np.concatenate([fp, fq])
+    cand_g = np.concatenate([fq, fp])
+    cand_l = np.concatenate([length, length])
+    cand_e = np.concatenate([np.arange(len(fp)), np.arange(len(fp))])
+    oo = np.lexsort((cand_g, -cand_l, cand_f))
+    firsts = np.ones(len(oo), bool)
+    firsts[1:] = cand_f[oo][1:] != cand_f[oo][:-1]
+    best_partner = np.full(n_faces, -1, np.int64)
+    best_edge = np.full(n_faces, -1, np.int64)
+    best_partner[cand_f[oo][firsts]] = cand_g[oo][firsts]
+    best_edge[cand_f[oo][firsts]] = cand_e[oo][firsts]
+    return (best_partner[fp] == fq) & (best_partner[fq] == fp) & (best_edge[fp] == np.arange(len(fp)))
 
 
 def _convex_join(pos, cnt, plane, fp, kp, fq, kq, tol: float = 1e-9) -> np.ndarray:
@@ -178,13 +197,7 @@ def _join(loops, cnt, vid, attr, pos, owner, grp, plane, degen, fp, kp, fq, kq):
     cp, cq = cnt[fp], cnt[fq]
     newc = cp + cq - 2
     K2 = max(K, int(newc.max()))
-    t = np.arange(K2)[None, :]
-    # p from b (kp+1) round to a (kp) : cp corners, then q after a (kq+2) up to before b: cq-2
-    from_p = t < cp[:, None]
-    ip = (kp[:, None] + 1 + t) % cp[:, None]
-    iq = (kq[:, None] + 2 + (t - cp[:, None])) % cq[:, None]
-    src_face = np.where(from_p, fp[:, None], fq[:, None])
-    src_k = np.where(from_p, ip, iq)
+    t, src_face, src_k = union_slots(fp, kp, fq, kq, cp, cq, K2)
     valid = t < newc[:, None]
     src_face = np.where(valid, src_face, fp[:, None])
     src_k = np.where(valid, src_k, ((kp + 1) % cp)[:, None])  # pad with corner 0 of the new loop

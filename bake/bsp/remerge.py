@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .build import Tree, hide_graph
-from .merge import _affine_ok
+from .merge import _affine_ok, mutual_proposals, union_slots
 from .split import MIN_COS_TILT, FaceStore
 
 CHECK_MAX = 512  # longest prefix/suffix list whose new order is checked (the check is O(m^2))
@@ -134,19 +134,7 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
         if len(fp) == 0:
             break
         # one joint per fragment per round: each proposes its longest joinable edge; mutual ones join
-        length = np.linalg.norm(pos[fp, kp] - pos[fp, (kp + 1) % cnt[fp]], axis=1)
-        cf = np.concatenate([fp, fq])
-        cg = np.concatenate([fq, fp])
-        cl = np.concatenate([length, length])
-        ce = np.concatenate([np.arange(len(fp))] * 2)
-        oo = np.lexsort((cg, -cl, cf))
-        firsts = np.ones(len(oo), bool)
-        firsts[1:] = cf[oo][1:] != cf[oo][:-1]
-        bp = np.full(F, -1, np.int64)
-        be = np.full(F, -1, np.int64)
-        bp[cf[oo][firsts]] = cg[oo][firsts]
-        be[cf[oo][firsts]] = ce[oo][firsts]
-        mutual = (bp[fp] == fq) & (bp[fq] == fp) & (be[fp] == np.arange(len(fp)))
+        mutual = mutual_proposals(pos, cnt, fp, kp, fq, F)
         fp, fq, kp, kq, ta, tb = fp[mutual], fq[mutual], kp[mutual], kq[mutual], ta[mutual], tb[mutual]
         if len(fp) == 0:
             break
@@ -160,12 +148,7 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
             attr = np.concatenate([attr, np.repeat(attr[:, :1], pad, 1)], 1)
             vid = np.concatenate([vid, np.repeat(vid[:, :1], pad, 1)], 1)
             K = K2
-        t = np.arange(K)[None, :]
-        from_p = t < cp[:, None]
-        ip = (kp[:, None] + 1 + t) % cp[:, None]
-        iq = (kq[:, None] + 2 + (t - cp[:, None])) % cq[:, None]
-        sf = np.where(from_p, fp[:, None], fq[:, None])
-        sk = np.where(from_p, ip, iq)
+        t, sf, sk = union_slots(fp, kp, fq, kq, cp, cq, K)
         # drop the straight joint corners: B is slot 0, A is slot cp - 1
         drop = ((t == 0) & (tb == 2)[:, None]) | ((t == cp[:, None] - 1) & (ta == 2)[:, None])
         keep = (t < newc[:, None]) & ~drop

@@ -150,6 +150,12 @@ def test_ctrl_c_during_simplify_exits_130_and_leaves_outputs(tmp_path):
         during = "bake: export" not in term.plain[seen:] and term.p.poll() is None
         term.p.send_signal(signal.SIGINT)  # what Ctrl-C at the terminal sends
         code = term.finish()
+        if code == 0 and not during:
+            # the signal came after this bake had finished (a rerun on a machine whose load
+            # dropped can be faster than the first run that set the timing): not a miss of the
+            # interrupt handling, but no hit either (the count below still asks for 4 of 6)
+            assert "bake: interrupted" not in term.plain, term.plain[-1500:]
+            continue
         hits += during
         assert code == 130, (f, code, term.text[-1500:])
         assert "bake: interrupted" in term.plain and not any(c in term.plain for c in CRASH), term.plain[-1500:]

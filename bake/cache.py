@@ -862,7 +862,10 @@ class Memo:
         root = getattr(self.store, "root", None)
         return str(root / name) if root is not None else name
 
-    def get(self, kind: str, key: str) -> Any:
+    def get(self, kind: str, key: str, accept: Any = None, what: str = "") -> Any:
+        """The memo stored under ``key``, or None. ``accept(payload)`` gives the value to use, or
+        None for a payload that is not what this memo holds (then it is dropped with a warning
+        naming ``what``). The caller says when it really used one (:meth:`used`)."""
         name = key + ENTRY_SUFFIX
         try:
             buf = self.store.read(name)
@@ -872,8 +875,15 @@ class Memo:
         except (CacheError, OSError, ValueError, TypeError, AttributeError) as e:
             self.forget(kind, key, str(e))
             return None
-        self.reused.append(kind)
+        if accept is not None:
+            out = accept(out)
+            if out is None:
+                self.forget(kind, key, f"does not hold {what}")
         return out
+
+    def used(self, kind: str) -> None:
+        """A memo of ``kind`` was reused (``report.json``: ``cache.memos_reused``)."""
+        self.reused.append(kind)
 
     def forget(self, kind: str, key: str, why: str) -> None:
         name = key + ENTRY_SUFFIX

@@ -402,11 +402,19 @@ WALK_MODELS = {"suzanne": ("suzanne_obj", "suzanne.obj"), "teapot": ("teapot_obj
 
 def walks_only() -> None:
     """Re-measure the walks alone (block counts do not depend on the machine's load) and keep the
-    rest of the JSON."""
+    rest of the JSON; the models' walk estimates are computed again from their recorded counts
+    with this checkout's fit (bake/bsp/cost.py: the counts depend on the tree, the blocks per
+    item on the reader's walk)."""
+    from bake.bsp.cost import blocks_estimate
+
     out = json.loads(OUT.read_text()) if OUT.exists() else {"machine": {}}
     with tempfile.TemporaryDirectory(prefix="bench-bsp-") as tmp:
         old = base_checkout(Path(tmp) / "base")
         out["walks"] = run_walks(old, WALK_MODELS, Path(tmp))
+    for row in (out.get("models") or {}).values():
+        walk = (row.get("after") or {}).get("walk")
+        if walk:
+            walk["blocks_estimate"] = blocks_estimate(walk)
     out["walks_command"] = " ".join(sys.argv)
     walk_ratios(out)
     OUT.write_text(json.dumps(out, indent=1))

@@ -119,6 +119,7 @@ def test_a_reused_tree_gives_the_bytes_of_a_cold_build(lit):
     darker = _recoloured(scene, vc, fc)
     warm, rec2 = _run(darker, cfg, memo)
     assert rec2.details["tree_reused"]["reused"] is True
+    assert memo.reused == ["bsp"]  # (report.json's cache.memos_reused)
     cold, rec3 = bsp_stage(darker, cfg.bsp)  # no memo: built
     same_scene(warm, cold)
     assert rec2.counts_out == rec3.counts_out and rec2.warnings == rec3.warnings
@@ -138,6 +139,7 @@ def test_colours_that_change_the_merges_build_the_tree_again(lit):
     other = _recoloured(scene, vc)
     warm, rec = _run(other, cfg, memo)
     assert rec.details["tree_reused"]["reused"] is False
+    assert memo.reused == []  # a tree found but not usable for these colours is not called reused
     cold, _ = bsp_stage(other, cfg.bsp)
     same_scene(warm, cold)
     assert rec.details["merged_triangles"] != _run(scene, cfg, None)[1].details["merged_triangles"]
@@ -308,8 +310,8 @@ def test_the_remerge_check_fails_when_colours_break_a_join(lit):
     made = S.make(scene, opt, True, True)
     state = made["recolour"]
     assert "remerge" in state
-    src, _, _ = S.merged(scene, dataclasses.replace(opt, epsilon=S.tolerance(scene, opt)), True, tape=True)
+    src, two, _ = S.merged(scene, dataclasses.replace(opt, epsilon=S.tolerance(scene, opt)), True, tape=True)
     corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
-    assert S._remerged_again(scene, opt, src, state, S.Tape.replay(state["tape"], corners))
+    assert S._remerged_again(scene, opt, src, two, state, S.Tape.replay(state["tape"], corners))
     noisy = corners + np.random.default_rng(3).random(corners.shape) * 0.5
-    assert not S._remerged_again(scene, opt, src, state, S.Tape.replay(state["tape"], noisy))
+    assert not S._remerged_again(scene, opt, src, two, state, S.Tape.replay(state["tape"], noisy))

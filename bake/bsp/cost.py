@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-# Blocks per item: a least-squares fit of the blocks scratch-vm 5.0.300 counts for the reader's
-# `bsp walk` (Suzanne, teapot, duck, Cornell box, AlphaBlendModeTest, 6 eyes each; largest error
-# 0.9%). A split record's cost includes its share of the leaves (a tree has about one leaf per
-# split); a peel record's its two ranges.
-BLOCKS = {"base": 49, "split": 114, "peel": 69, "coplanar_ranges": 29}
+# Blocks per item: a least-squares fit (rounded) of the blocks scratch-vm 5.0.300 counts for the
+# reader's `bsp walk` as it emits and pops in its branches (Suzanne, teapot, duck, house, spot,
+# fuze, the CSG slivers and the tinyobj Cornell box with the default BSP, 6 eyes each: largest
+# error 0.2%, except 12 blocks of 176 on the Cornell box's one-split tree). A split record's cost
+# includes its share of the leaves (a tree has about one leaf per split); a peel record's its two
+# ranges.
+BLOCKS = {"base": 27, "split": 90, "peel": 47, "coplanar_ranges": 20}
 SIZES = {0: 3, 1: 5}  # leaf, peel; a split record (T >= 4) has 6 items
 
 

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..cache import active_memo, content_digest
 from ..record import StageRecord
 from ..scene import Scene, ScratchList
 from .build import BuildOptions, Tree, build_tree
@@ -90,6 +91,12 @@ def tolerance(scene: Scene, opt: BuildOptions) -> float:
     return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
 
 
+def tri_two_sided(scene: Scene) -> np.ndarray:
+    """Per triangle: is its material drawn from both sides?"""
+    two_mat = np.array([m.double_sided for m in scene.materials], bool)
+    return two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+
+
 def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True,
           pre_remerge: list | None = None):
     """Everything but writing the scene: (store, sources, tree, encoded, frame).
@@ -140,8 +147,7 @@ def merged(scene: Scene, opt: BuildOptions, merge: bool, tape: bool = False) -> 
         p = pos_w[scene.triangles]
         keep = np.flatnonzero(np.any(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) != 0, axis=1))
     tris = scene.triangles[keep]
-    two_mat = np.array([m.double_sided for m in scene.materials], bool)
-    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    two = tri_two_sided(scene)
     attr, layout = _attributes(scene)
     attr = attr[keep]
     ch = None
@@ -306,8 +312,7 @@ def typical_walk(scene: Scene, enc: Encoded) -> dict:
 
     cam = auto_camera(scene.positions[scene.used_vertex_mask()])
     eye = [cam.x, cam.y, cam.z]
-    two_mat = np.array([m.double_sided for m in scene.materials], bool)
-    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    two = tri_two_sided(scene)
     counts = walk_counts(enc.nodes, enc.planes, scene.triangles, scene.positions, two, eye)
     return {"eye": eye, **counts, "plane_tests": counts["split"], "blocks_estimate": blocks_estimate(counts)}
 
@@ -326,8 +331,7 @@ def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragmen
     gives: a colour change that makes two groups one, or splits one, is a new key). The
     per-triangle colours never reach the tree (:func:`apply_layout` takes them from the scene);
     the vertex colours decide merges and cut vertices, which :func:`recolour` checks."""
-    two_mat = np.array([m.double_sided for m in scene.materials], bool)
-    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
+    two = tri_two_sided(scene)
     mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
     return ["bsp tree 2", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
             bool(remerge_fragments),
@@ -410,8 +414,6 @@ def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool =
 def _merge_signature(src: SourceFaces, scene: Scene) -> str:
     """A digest of the merged source faces apart from their vertex colours: two scenes whose
     merges came out the same (same faces, corners and corner ids) have the same signature."""
-    from ..cache import content_digest
-
     _, layout = _attributes(scene)
     chans = np.ones(src.attr.shape[2], bool)
     if "vertex_color" in layout:
@@ -442,15 +444,14 @@ def _remerge_signature(store: FaceStore, tree: Tree, ch: int) -> str:
     """A digest of the fragments a tree draws after the re-merge (the lists, and each fragment's
     corners with their positions, vertex numbers and tape ids in channel ``ch``), without the
     colours: the same joins, the same signature."""
-    from ..cache import content_digest
-
     n = store.n
     ids = store.attr[:n, :, ch]
     lists = [getattr(tree, f.name) for f in dataclasses.fields(tree) if f.name not in ("store", "stats")]
     return content_digest(n, *lists, store.count[:n], store.vid[:n], store.src[:n], store.pos[:n], ids)
 
 
-def _remerged_again(scene: Scene, opt: BuildOptions, src: SourceFaces, state: dict, vals: np.ndarray) -> bool:
+def _remerged_again(scene: Scene, opt: BuildOptions, src: SourceFaces, two: np.ndarray, state: dict,
+                    vals: np.ndarray) -> bool:
     """Does the re-merge, run again on the tree as it was before it with this scene's vertex
     colours (``vals``: every tape id's colour, computed as the build computes it), join exactly
     the fragments it joined before?"""
@@ -459,8 +460,6 @@ def _remerged_again(scene: Scene, opt: BuildOptions, src: SourceFaces, state: di
     _, layout = _attributes(scene)
     ids = store.attr[:, :, ch].astype(np.int64)
     store.attr[:, :, layout["vertex_color"]] = vals[np.clip(ids, 0, len(vals) - 1)]
-    two_mat = np.array([m.double_sided for m in scene.materials], bool)
-    two = two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
     first_tri = src.tri_list[src.tri_start[:-1]]
     eps = tolerance(scene, opt)
     remerge(store, tree, _groups(scene, two)[first_tri], eps, opt.min_area, shown=np.arange(store.A) != ch)
@@ -480,7 +479,7 @@ def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict |
     layout = made["layout"]
     if scene.vertex_colors is None or state is None:
         return made if scene.vertex_colors is None and state is None else None
-    src, _, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
+    src, two, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
     if ch is None or _merge_signature(src, scene) != state["merge"]:
         return None
     corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
@@ -488,7 +487,7 @@ def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict |
     n_new = int(layout["new_vertices"])
     vcol = scene.vertex_colors
     vals = Tape.replay(state["tape"], corners)
-    if "remerge" in state and not _remerged_again(scene, opt, src, state, vals):
+    if "remerge" in state and not _remerged_again(scene, opt, src, two, state, vals):
         return None
     if n_new:
         key = np.concatenate([rp["pos"], vals[rp["ids"]]], 1)
@@ -520,12 +519,6 @@ def finish(scene: Scene, made: dict, rec: StageRecord) -> Scene:
     return new
 
 
-def _memo():
-    from ..cache import active_memo
-
-    return active_memo()
-
-
 def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     rec = StageRecord("bsp")
@@ -543,17 +536,16 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         return new, rec
     # A tree built for the same geometry, options and merge groups is reused (a bake whose
     # lighting changed): bake.cache.Memo, the stage cache's store, keyed by tree_key_parts.
-    memo = _memo()
+    memo = active_memo()
     key = made = None
     if memo is not None:
         key = memo.key("bsp", *tree_key_parts(scene, opt, merge, remerge_fragments))
-        made = memo.get("bsp", key)
-        if made is not None and not _is_made(made):
-            memo.forget("bsp", key, "does not hold a BSP tree")
-            made = None
+        made = memo.get("bsp", key, lambda m: m if _is_made(m) else None, "a BSP tree")
         if made is not None:  # the same geometry and groups: the vertex colours may still decide
             made = recolour(scene, opt, merge, made)
     reused = made is not None
+    if reused:
+        memo.used("bsp")
     if made is None:
         made = make(scene, opt, merge, remerge_fragments)
         if memo is not None:

@@ -304,12 +304,10 @@ def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light:
     if memo is not None:
         key = memo.key("preview", "preview geometry 1", cam, mesh.verts, mesh.tris, mesh.material, mesh.two_sided,
                        _numbers(mesh.bsp_nodes), _numbers(mesh.bsp_planes), float(tie))
-        raw = memo.get("preview", key)
-        if raw is not None:
-            geo = _unpack_geometry(raw, cam)
-            if geo is None:
-                memo.reused.pop()
-                memo.forget("preview", key, "does not hold a preview's geometry for this camera")
+        geo = memo.get("preview", key, lambda raw: _unpack_geometry(raw, cam),
+                       "a preview's geometry for this camera")
+        if geo is not None:
+            memo.used("preview")
     if geo is None:
         order, how = painter_order(mesh, cam.position)
         pim = render(cam, corners, mode="painter", order=order, two_sided=two)

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from ..cache import Unsupported, active_memo
 from ..colorspace import to_bytes
 from ..config import LightingConfig
 from ..record import StageRecord
@@ -141,12 +142,6 @@ def trace_key_parts(scene: Scene, cfg: LightingConfig) -> list | None:
     return ["lighting trace 1", section, scene]
 
 
-def _memo():
-    from ..cache import active_memo
-
-    return active_memo()
-
-
 def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     rec = StageRecord(name="lighting")
@@ -157,23 +152,19 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
         rec.seconds = time.perf_counter() - t0
         return scene, rec
     # A trace made for the same scene and keys but another exposure or tone map is reused (bake.cache.Memo)
-    memo = _memo() if albedo is None else None
+    memo = active_memo() if albedo is None else None
     parts = trace_key_parts(scene, cfg) if memo is not None else None
     key = part = None
     if parts is not None:
         try:
             key = memo.key("lighting", *parts)
-        except Exception as e:  # (a scene the entry format does not store: no reuse)
-            from ..cache import Unsupported
-
-            if not isinstance(e, Unsupported):
-                raise
+        except Unsupported:  # (a scene the entry format does not store: no reuse)
             key = None
-        part = memo.get("lighting", key) if key is not None else None
-        if part is not None and not _is_trace(part):
-            memo.forget("lighting", key, "does not hold a lighting trace")
-            part = None
+        if key is not None:
+            part = memo.get("lighting", key, lambda p: p if _is_trace(p) else None, "a lighting trace")
     reused = part is not None
+    if reused:
+        memo.used("lighting")
     baker = None
     if part is None:
         plan = make_plan(scene, cfg)

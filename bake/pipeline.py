@@ -145,7 +145,9 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     The bake loads the entry of the deepest stage whose key is unchanged and runs the stages after
     it; ``observe`` then sees the loaded stage's scene, not those of the stages before it. Stages
     named in ``recompute`` and every stage after the first of them always run and are not stored
-    (``bake sweep`` times them). A bake from a given ``scene`` uses no cache."""
+    (``bake sweep`` times them); the stages after them may reuse work inside the stage (the
+    cache's memos: a BSP tree the new colours do not change), the ``recompute`` stages reuse
+    none. A bake from a given ``scene`` uses no cache."""
     from . import cache as cache_mod
 
     t0 = time.perf_counter()
@@ -204,7 +206,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         counts_in = counts(scene)
         t = time.perf_counter()
         try:
-            with cache_mod.using_memo(memo if i < limit else None):  # (a timed sweep stage reuses nothing)
+            # (the stages a sweep varies reuse nothing: their seconds are what it measures)
+            with cache_mod.using_memo(memo if spec.name not in recompute else None):
                 scene, rec = fn(scene, sections[i])
         except ConfigError as e:
             raise _in_config_file(e, cfg) from None

@@ -29,8 +29,10 @@ Stage reuse: the stages before the key's stage do not change from row to row, so
 the first loads them from the stage cache (bake/cache.py): the bake's folder cache when it has one
 (``bake sweep`` uses ``OUT/.bake-cache/stages``, so a sweep after ``bake run`` does not even
 compute them once), else one in memory for the sweep. The key's stage and every stage after it
-always run (their seconds are the point of the sweep) and are not stored. ``cache=None`` bakes
-every row from scratch.
+always run (their seconds are the point of the sweep) and are not stored; the key's stages reuse
+nothing, the stages after them may reuse work inside the stage (a BSP tree whose merges the new
+colours do not change: a row's ``reused_in_stages``). ``cache=None`` bakes every row from
+scratch.
 """
 
 from __future__ import annotations
@@ -138,6 +140,7 @@ class _Run:
     report: dict | None = None  # report.json's shape (config, materials) for the previews
     final: Scene | None = None  # the scene after the last stage (else ``scene``)
     cached: list[str] | None = None  # stages loaded from the stage cache
+    reused: list[str] | None = None  # stages after the key's that reused work (bake.cache.Memo kinds)
 
 
 def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -> _Run:
@@ -174,7 +177,8 @@ def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -
     # the lighting stage's scene: its colours line up with the lighting artefact (a BSP splits later)
     return _Run(seen.get("lighting", res.scene), recs, sum(recs[n]["seconds"] for n in ran) if ran else total,
                 total, lists, report_mod.build(res), final=res.scene,
-                cached=list((res.cache or {}).get("from_cache", [])))
+                cached=list((res.cache or {}).get("from_cache", [])),
+                reused=list((res.cache or {}).get("memos_reused", [])))
 
 
 def _mesh(run: _Run):
@@ -339,7 +343,10 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
              "cache": None if stage_cache is None else {
                  "where": stage_cache.store.describe(),
                  "note": "the stages before the key's are baked once and loaded from the stage cache after that "
-                         "(cached_stages per row); total_seconds counts loading them, not computing them"},
+                         "(cached_stages per row); total_seconds counts loading them, not computing them. The "
+                         "key's own stages reuse nothing (seconds is their full cost); a stage after them may "
+                         "reuse work its inputs did not change (reused_in_stages per row: a BSP tree when the "
+                         "new colours change no merge), and total_seconds is then that cheaper bake"},
              "metric": "error: " + err_label + "; image_rmse: depth-buffer previews of the written lists "
                        f"({PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]}, 3 views) against the reference's; rmse / max "
                        "error of shown colours (0..1, RGB) over traced vertices (or triangles); irradiance is linear"}
@@ -371,6 +378,7 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
         "reported_error": {e["name"]: e["error"] for e in effects if "error" in e},
         "effect_seconds": {e["name"]: e.get("seconds") for e in effects},
         "cached_stages": list(run.cached or []),
+        "reused_in_stages": list(run.reused or []),
     }
 
 

@@ -145,16 +145,57 @@ def test_colours_that_change_the_merges_build_the_tree_again(lit):
     assert rec.details["merged_triangles"] != _run(scene, cfg, None)[1].details["merged_triangles"]
 
 
-def test_face_colours_that_change_the_merge_groups_are_another_key(lit):
+def test_face_colours_that_change_the_merges_build_the_tree_again(lit):
+    """The merge groups are not part of the key with vertex colours; new groups that change the
+    merges are caught when the merges are made again, and the tree is built again."""
     _, _, cfg, scene = lit
     memo = cache_mod.Memo(cache_mod.MemoryStore())
-    _run(scene, cfg, memo)
+    _, rec0 = _run(scene, cfg, memo)
     fc = scene.face_colors.copy()
-    fc[::2, :3] = 0.5  # every other triangle one colour: other groups
+    fc[::2, :3] = 0.5  # every other triangle one colour: other groups, the plate's merges broken
     other = _recoloured(scene, scene.vertex_colors, fc)
     warm, rec = _run(other, cfg, memo)
     assert rec.details["tree_reused"]["reused"] is False
-    assert memo.reused == []  # not found under the key at all
+    assert memo.reused == []
+    assert rec.details["merged_triangles"] != rec0.details["merged_triangles"]
+    cold, _ = bsp_stage(other, cfg.bsp)
+    same_scene(warm, cold)
+
+
+def _normals(scene):
+    p = scene.positions[scene.triangles]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def test_face_colours_that_regroup_without_changing_a_merge_reuse_the_tree(lit):
+    """A lit bake's face colours are nearly all different; a new light or AO sample count makes a
+    few of them equal or unequal. Triangles that face different ways can never merge, so giving
+    two of them one colour regroups the faces without changing a merge: the tree is reused, and
+    the bytes are a cold build's."""
+    _, _, cfg, scene = lit
+    memo = cache_mod.Memo(cache_mod.MemoryStore())
+    _run(scene, cfg, memo)
+    from bake.bsp.stage import _canonical, _groups, tri_two_sided
+
+    two = tri_two_sided(scene)
+    g = _groups(scene, two)
+    alone = np.flatnonzero(np.bincount(g)[g] == 1)  # triangles alone in their group
+    nrm = _normals(scene)
+    # two of them of one material, facing different ways
+    pairs = [(int(a), int(b)) for a in alone for b in alone
+             if scene.tri_material[a] == scene.tri_material[b] and nrm[a] @ nrm[b] < 0.5]
+    a, b = pairs[0]
+    fc = scene.face_colors.copy() * 0.9
+    fc[b] = fc[a]  # one group of two where there were two (colour and albedo alike)
+    other = _recoloured(scene, scene.vertex_colors * 0.9, fc)
+    if scene.face_albedo is not None:
+        alb = scene.face_albedo.copy()
+        alb[b] = alb[a]
+        other = other.replace(face_albedo=alb)
+    assert not np.array_equal(_canonical(_groups(other, two)), _canonical(_groups(scene, two)))
+    warm, rec = _run(other, cfg, memo)
+    assert rec.details["tree_reused"]["reused"] is True and memo.reused == ["bsp"]
     cold, _ = bsp_stage(other, cfg.bsp)
     same_scene(warm, cold)
 
@@ -240,20 +281,23 @@ def test_a_damaged_tree_memo_is_ignored_with_a_warning(lit, tmp_path):
     assert next(s for s in rep["stages"] if s["name"] == "bsp")["details"]["tree_reused"]["reused"] is True
 
 
-def test_stages_a_sweep_times_reuse_no_tree(lit, tmp_path):
-    """``bake sweep`` measures the stages after the swept key (``recompute``): they reuse no tree,
-    though a bake of the same config does."""
+def test_a_sweep_times_its_stage_without_reuse_and_the_stages_after_may_reuse(lit, tmp_path):
+    """``bake sweep`` measures the key's stage (``recompute``): it reuses nothing (no lighting
+    trace), while a stage after it reuses what the new colours did not change (the BSP tree), as
+    a bake of the same config does."""
     root, cfg_path, _, _ = lit
     out = tmp_path / "o"
     bake(cfg_path, out)
     store = cache_mod.DiskStore(out / cache_mod.SUBDIR, 10**9)
     cfg = pipeline.load_config_for(cfg_path, ["lighting.exposure=0.35"])
     res = pipeline.run(cfg, cache=cache_mod.StageCache(store), recompute=("lighting",))
+    light = next(r for r in res.records if r.name == "lighting")
     bsp = next(r for r in res.records if r.name == "bsp")
-    assert bsp.details["tree_reused"]["reused"] is False and res.cache["memos_reused"] == []
+    assert light.details["trace_reused"]["reused"] is False and light.details["rays"] > 0
+    assert bsp.details["tree_reused"]["reused"] is True and res.cache["memos_reused"] == ["bsp"]
     res = pipeline.run(cfg, cache=cache_mod.StageCache(store))
-    bsp = next(r for r in res.records if r.name == "bsp")
-    assert bsp.details["tree_reused"]["reused"] is True
+    assert next(r for r in res.records if r.name == "lighting").details["trace_reused"]["reused"] is True
+    assert next(r for r in res.records if r.name == "bsp").details["tree_reused"]["reused"] is True
 
 
 # --------------------------------------------------------------------------- the lighting trace

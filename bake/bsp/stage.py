@@ -326,11 +326,15 @@ def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tu
 def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> list:
     """The key of a reusable tree: everything of the scene and options the tree and the split
     layout depend on except the colours. Positions and their grid, corners, materials (sidedness,
-    textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and the merge
-    groups (material, sidedness, face colour and albedo, as the group numbers :func:`_groups`
-    gives: a colour change that makes two groups one, or splits one, is a new key). The
-    per-triangle colours never reach the tree (:func:`apply_layout` takes them from the scene);
-    the vertex colours decide merges and cut vertices, which :func:`recolour` checks."""
+    textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and, without
+    vertex colours, the merge groups (material, sidedness, face colour and albedo, as the group
+    numbers :func:`_groups` gives: a colour change that makes two groups one, or splits one, is a
+    new key). With vertex colours the groups are left out: the groups and the vertex colours
+    decide only the coplanar merges and the re-merge's joins, which :func:`recolour` runs again
+    with the new colours and groups and compares (a lit bake's face colours are nearly all
+    different, and a new light or AO sample count regroups the few equal ones without changing a
+    merge). The per-triangle colours never reach the tree (:func:`apply_layout` takes them from
+    the scene)."""
     two = tri_two_sided(scene)
     mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
     return ["bsp tree 2", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
@@ -338,7 +342,7 @@ def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragmen
             scene.positions, scene.position_decimals, scene.triangles, scene.tri_material, mats,
             scene.tri_polygon, scene.tri_uvs, scene.tri_lightmap_uvs,
             None if scene.vertex_colors is None else list(scene.vertex_colors.shape),
-            _canonical(_groups(scene, two))]
+            _canonical(_groups(scene, two)) if scene.vertex_colors is None else None]
 
 
 def _canonical(labels: np.ndarray) -> np.ndarray:
@@ -362,7 +366,7 @@ def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool =
     recolour_state = None
     if store.tape is not None:
         recolour_state = {"tape": store.tape.state(), "merge": _merge_signature(src, scene)}
-        if tree.stats.get("remerged", 0):  # the re-merge's joins depend on the vertex colours
+        if remerge_fragments:  # the re-merge's joins depend on the vertex colours and groups (even none)
             recolour_state["remerge"] = {"pre": pre[0], "signature": _remerge_signature(store, tree, store.tape.ch)}
     nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
     planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())

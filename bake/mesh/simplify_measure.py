@@ -36,11 +36,10 @@ the simplified side, and its local repairs, cut every cell around their seeds).
 Distances
 ---------
 Every point's distance to Y comes from :class:`~bake.mesh.simplify_error.SurfaceIndex` (exact
-point-triangle distances to the closest of a few candidate triangles: an upper bound, exact
-unless the candidates miss the closest triangle). The largest ones are then made exact by
-checking every triangle of Y that could be closer (``SurfaceIndex.exact``), until the largest
-exact distance is at least every bound left: the maximum reported is the exact distance at a
-point of the sample. It is a *sampled* maximum: the true maximum over the surface can only be
+point-triangle distances from libigl's AABB tree). The largest ones are checked again against
+every triangle of Y that could be closer (``SurfaceIndex.exact``), until the largest checked
+distance is at least every value left: the maximum reported is the exact distance at a point
+of the sample. It is a *sampled* maximum: the true maximum over the surface can only be
 larger, by at most how much the distance grows between samples; it is not called exact.
 tests/mesh/test_simplify_error.py compares it with an independent measurement (MeshLab's
 Hausdorff filter on 300,000 points, refined around its worst samples).
@@ -286,7 +285,7 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     KEEP_SHARE of the largest distance made exact so far (the stage's local repairs, which
     compare small patches triangle by triangle, cut every cell around their seeds)."""
     P = grid.P
-    if len(P) == 0 or index_y.tree is None:
+    if len(P) == 0 or len(index_y.F) == 0:
         inf = 0.0 if len(P) == 0 else float("inf")
         return Directed(inf, inf, np.zeros(3), -1, len(P), 0, True)
     d, near = index_y.distance(P)

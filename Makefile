@@ -26,6 +26,7 @@ test: $(STAMP) vm/node_modules
 	$(BIN)/python -m pytest -q -ra
 
 bench: $(STAMP) vm/node_modules
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[dev,bench]'
 	mkdir -p benchmarks/results
 	set -e; for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b; done
 	$(BIN)/python tools/doc_tables.py

@@ -251,7 +251,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if not args.quiet:
         for line in sweep_mod.summary_lines(table):
             print(line)
-        print(f"  wrote {out}.json and {out}.png" + (f"; updated {out_dir / 'report.html'}" if html_written else
+        print(f"  wrote {out}.json and {out}.svg" + (f"; updated {out_dir / 'report.html'}" if html_written else
                                                      f" (bake into {out_dir} and its report.html shows them)"))
     return 0
 
@@ -343,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--reference", metavar="VALUE", help="compare against a bake at this value "
                     "(default: the highest value swept)")
     sw.add_argument("--out", help="the bake's output folder (default: bake-out/<name>); writes "
-                    "OUT/sweeps/KEY.json and .png, shown by OUT/report.html")
+                    "OUT/sweeps/KEY.json and .svg, shown by OUT/report.html")
     common(sw)
     sw.set_defaults(func=cmd_sweep)
 

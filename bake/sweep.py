@@ -2,8 +2,8 @@
 
 ``bake sweep MODEL --vary KEY=V1,V2,...`` runs the whole pipeline once per value of any numeric
 key of any stage (simplify targets, BSP candidates, BVH bins, AO and shadow samples, lightmap
-resolution, ...) and writes a table, as JSON and as a PNG plot of error and bytes against
-seconds, into ``OUT/sweeps/<key>.json|png`` where ``bake report OUT`` shows it. One untimed
+resolution, ...) and writes a table, as JSON and as an SVG plot of error and bytes against
+seconds, into ``OUT/sweeps/<key>.json|svg`` where ``bake report OUT`` shows it. One untimed
 warm-up bake of the first value runs before the timed ones, so loading libraries is not charged
 to the first row.
 
@@ -19,7 +19,7 @@ otherwise (lightmap resolution, textures).
 API::
 
     table = sweep("bake.toml", "lighting.ao.samples", [16, 64, 256], reference=4096,
-                  out="bake-out/model/sweeps/lighting.ao.samples")   # writes .json and .png
+                  out="bake-out/model/sweeps/lighting.ao.samples")   # writes .json and .svg
     key, values = parse_vary("mesh.simplify.target_ratio=0.02,0.1,0.5")
 
 ``scene=`` bakes a given :class:`~bake.scene.Scene` with the lighting stage alone (no import,
@@ -278,7 +278,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
 
     ``reference``: ``None`` = the highest value in ``values``; a number = an extra bake at that
     value (not a row); a :class:`Scene` = a lighting bake made elsewhere. ``out`` (a path without
-    suffix) writes ``out.json`` and ``out.png``. ``cache``: ``"auto"`` = the config's stage cache
+    suffix) writes ``out.json`` and ``out.svg``. ``cache``: ``"auto"`` = the config's stage cache
     (``StageCache.for_config``) or one in memory, a ``StageCache``, or None (no reuse). Returns the
     table (JSON-serialisable)."""
     base = _load(config)
@@ -424,15 +424,13 @@ def _slope(rows: list[dict]) -> float | None:
 
 
 def write(table: dict, out: str | Path) -> tuple[Path, Path]:
-    """Write ``out.json`` and ``out.png``; returns both paths."""
+    """Write ``out.json`` and ``out.svg`` (the plot); returns both paths."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     jp = out.with_name(out.name + ".json")
-    pp = out.with_name(out.name + ".png")
+    pp = out.with_name(out.name + ".svg")
     write_atomic(jp, (json.dumps(table, indent=2, default=_jsonable) + "\n").encode("utf-8"))
-    buf = io.BytesIO()
-    plot(table, buf)
-    write_atomic(pp, buf.getvalue())
+    write_atomic(pp, plot(table).encode("utf-8"))
     return jp, pp
 
 
@@ -466,89 +464,86 @@ def pareto_front(seconds: np.ndarray, error: np.ndarray) -> np.ndarray:
     return order[e < best_before].astype(np.int64)
 
 
-def plot(table: dict, path: str | Path | io.BytesIO) -> str | Path | io.BytesIO:
-    """Three panels: the key's error against seconds, list bytes against seconds (each point
-    labelled with its value; against seconds only the Pareto front of error and seconds is
-    joined, in order of seconds), and the errors against the value (for lighting keys each
-    effect's actual error next to the stage's own estimate, in the same units)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def plot(table: dict, path: str | Path | io.BytesIO | None = None) -> str:
+    """Three panels, as SVG (bake/svgplot.py): the key's error against seconds, list bytes
+    against seconds (each point labelled with its value; against seconds only the Pareto front of
+    error and seconds is joined, in order of seconds), and the errors against the value (for
+    lighting keys each effect's actual error next to the stage's own estimate, in the same
+    units). Returns the SVG text, and writes it to ``path`` when given."""
+    from .svgplot import COLORS, Figure
 
     rows = table["rows"]
     key = table["key"]
     secs = np.array([float(r["seconds"]) for r in rows])
     x = np.array([float(r["value"]) for r in rows])
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(14, 4))
+    fig = Figure(3, title=f"bake sweep {key}")
+    ax1, ax2, ax3 = fig.panels
 
     def series(values, xs=x):
         y = np.array([v if isinstance(v, (int, float)) and v is not None else np.nan for v in values], float)
         return np.isfinite(y) & (y > 0) & np.isfinite(xs), y
 
-    def labelled(ax, xs, ys, ok, style, label):
+    def labelled(ax, xs, ys, ok, marker, label):
         """Points labelled with their values; no line (against seconds the value order is not
-        the order along the axis)."""
-        line = ax.plot(xs[ok], ys[ok], style, linestyle="none", label=label)[0]
-        for xi, yi, r in zip(xs[ok], ys[ok], [r for r, k in zip(rows, ok) if k]):
-            ax.annotate(f"{r['value']:g}" if isinstance(r["value"], (int, float)) else str(r["value"]), (xi, yi),
-                        textcoords="offset points", xytext=(4, 4), fontsize=7)
-        return line
+        the order along the axis). Returns the colour."""
+        notes = [f"{r['value']:g}" if isinstance(r["value"], (int, float)) else str(r["value"])
+                 for r, k in zip(rows, ok) if k]
+        return ax.points(xs[ok], ys[ok], marker=marker, label=label, notes=notes)
 
-    def front(ax, xs, ys, ok, line):
+    def front(ax, xs, ys, ok, color, label):
         f = pareto_front(xs[ok], ys[ok])
         if len(f) > 1:
-            ax.plot(xs[ok][f], ys[ok][f], "-", color=line.get_color(), alpha=0.6,
-                    label=f"{line.get_label()}: fastest for its error")
+            ax.line(xs[ok][f], ys[ok][f], style="-", color=color, label=f"{label}: fastest for its error")
 
+    err_label = table.get("error_key", "error")
     ok, y = series([r.get("error") for r in rows], secs)
     if ok.any():
-        front(ax1, secs, y, ok, labelled(ax1, secs, y, ok, "o", table.get("error_key", "error")))
+        front(ax1, secs, y, ok, labelled(ax1, secs, y, ok, "o", err_label), err_label)
         if (y[ok] > 0).all() and y[ok].max() > 20 * y[ok].min():
-            ax1.set_yscale("log")
+            ax1.ylog = True
     ok2, y2 = series([r.get("image_rmse") for r in rows], secs)
     if ok2.any() and table.get("error_key") != "image_rmse":
-        front(ax1, secs, y2, ok2, labelled(ax1, secs, y2, ok2, "s", "image_rmse"))
-    ax1.set_xlabel(f"seconds ({'+'.join(table.get('stages') or ['stage'])})")
-    ax1.set_ylabel("error")
-    ax1.set_title(f"{table.get('error_metric', 'error')}", fontsize=9)
+        front(ax1, secs, y2, ok2, labelled(ax1, secs, y2, ok2, "s", "image_rmse"), "image_rmse")
+    ax1.xlabel = f"seconds ({'+'.join(table.get('stages') or ['stage'])})"
+    ax1.ylabel = "error"
+    ax1.title = str(table.get("error_metric", "error"))[:60]
     ok, y = series([r.get("bytes") for r in rows], secs)
     if ok.any():
         labelled(ax2, secs, y, ok, "o", "list bytes in project.json")
-    ax2.set_xlabel("seconds")
-    ax2.set_ylabel("bytes")
-    ax2.set_title("what it costs in project.json", fontsize=9)
+    ax2.xlabel = "seconds"
+    ax2.ylabel = "bytes"
+    ax2.title = "what it costs in project.json"
     if key.startswith("lighting."):
-        for name, label, style in (("rmse", "RMSE vertex colour", "o-"), ("max_error", "max error", "s--"),
-                                   ("face_rmse", "RMSE triangle colour", "^-")):
+        ax3.xlog = ax3.ylog = True
+        for name, label, marker, style in (("rmse", "RMSE vertex colour", "o", "-"),
+                                           ("max_error", "max error", "s", "--"),
+                                           ("face_rmse", "RMSE triangle colour", "^", "-")):
             ok, y = series([r.get(name) for r in rows])
             if ok.any():
-                ax3.loglog(x[ok], y[ok], style, label=label)
+                ax3.line(x[ok], y[ok], style=style, marker=marker, label=label)
         effects = sorted({e for r in rows for e in r["reported_error"]})
         for k, eff in enumerate(effects):
             comp = _component(eff)
+            color = COLORS[(k + 3) % len(COLORS)]
             ok, y = series([r.get("components", {}).get(comp, {}).get("rmse") for r in rows])
             if ok.any():
-                ax3.loglog(x[ok], y[ok], "o-", color=f"C{k + 3}", label=f"{comp}: actual RMSE")
+                ax3.line(x[ok], y[ok], style="-", marker="o", color=color, label=f"{comp}: actual RMSE")
             ok, y = series([r["reported_error"].get(eff) for r in rows])
             if ok.any():
-                ax3.loglog(x[ok], y[ok], "x:", color=f"C{k + 3}", label=f"{eff}: stage's estimate")
-        ax3.set_title("per effect, against " + str(table["reference"].get("kind")), fontsize=9)
+                ax3.line(x[ok], y[ok], style=":", marker="x", color=color, label=f"{eff}: stage's estimate")
+        ax3.title = "per effect, against " + str(table["reference"].get("kind"))
     else:
-        for name, style in (("error", "o-"), ("image_rmse", "s--")):
+        for name, marker, style in (("error", "o", "-"), ("image_rmse", "s", "--")):
             ok, y = series([r.get(name) for r in rows])
             if ok.any():
-                ax3.plot(x[ok], y[ok], style, label=name)
+                ax3.line(x[ok], y[ok], style=style, marker=marker, label=name)
         if (x > 0).all() and x.max() > 20 * x.min():
-            ax3.set_xscale("log")
-        ax3.set_title("errors against the value", fontsize=9)
-    ax3.set_xlabel(key)
-    for ax in (ax1, ax2, ax3):
-        ax.grid(True, which="both", alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-    fig.suptitle(f"bake sweep {key}", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png", metadata={"Software": None})
-    plt.close(fig)
-    return path
+            ax3.xlog = True
+        ax3.title = "errors against the value"
+    ax3.xlabel = key
+    text = fig.svg()
+    if isinstance(path, io.BytesIO):
+        path.write(text.encode("utf-8"))
+    elif path is not None:
+        write_atomic(Path(path), text.encode("utf-8"))
+    return text

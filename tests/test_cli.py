@@ -167,10 +167,15 @@ def test_sweep_command_writes_table_and_plot(tmp_path, capsys):
     assert set(rows) == {4, 16, 64} and rows[64]["rmse"] == 0.0
     assert rows[4]["rmse"] > rows[16]["rmse"] > 0  # error falls with samples against the 64-spp reference
     assert rows[4]["rays"] < rows[16]["rays"] < rows[64]["rays"]
-    assert stem.with_suffix(".samples.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    svg = stem.with_suffix(".samples.svg").read_text()
+    assert svg.startswith("<svg ") and "lighting.ao.samples" in svg
     assert "updated" in stdout and "report.html" in stdout
     page = (out / "report.html").read_text()
-    assert "alt='sweep lighting.ao.samples'" in page  # the bake's report shows the sweep
+    # the bake's report shows the sweep, its plot embedded as the SVG the sweep wrote
+    import base64
+
+    assert "alt='sweep lighting.ao.samples' src='data:image/svg+xml;base64," \
+        + base64.b64encode(svg.encode()).decode() + "'" in page
     code, _, err = run(["sweep", str(model), "--vary", "bsp.enabled=1,2"], capsys)
     assert code == 2 and "numeric" in err
 

@@ -47,7 +47,7 @@ def test_parse_vary():
         parse_vary("lighting.ao.sample=1")
 
 
-def test_sweep_ao_samples_against_reference_writes_json_and_png(tmp_path):
+def test_sweep_ao_samples_against_reference_writes_json_and_svg(tmp_path):
     sc = _scene()
     out = tmp_path / "sweep_ao"
     table = sweep(_cfg(), "lighting.ao.samples", [4, 16, 64, 256], reference=4096, scene=sc, out=out)
@@ -63,8 +63,14 @@ def test_sweep_ao_samples_against_reference_writes_json_and_png(tmp_path):
     assert rows[1]["rays"] == 4 * rows[0]["rays"]
     j = json.loads((tmp_path / "sweep_ao.json").read_text())
     assert j["key"] == "lighting.ao.samples" and j["reference"]["kind"] == "reference run"
-    png = (tmp_path / "sweep_ao.png").read_bytes()
-    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+    panels = _drawn((tmp_path / "sweep_ao.svg").read_text())
+    assert len(panels) == 3
+    rmse_line = panels[2]["RMSE vertex colour"]
+    assert len(rmse_line["points"]) == 4 and len(rmse_line["line"]) == 4
+    # the third panel is log-log and the RMSE falls with the samples: the line goes right and down
+    # (SVG y grows downwards)
+    xs, ys = zip(*rmse_line["line"])
+    assert all(b > a for a, b in zip(xs, xs[1:])) and all(b > a for a, b in zip(ys, ys[1:]))
 
 
 def test_sweep_against_highest_value_and_errors():
@@ -123,7 +129,7 @@ def test_sweep_simplify_target_reports_hausdorff_bytes_and_image_error(tmp_path)
     # image error against the reference (the highest value) is 0 there and grows as it coarsens
     assert rows[-1]["reference"] and rows[-1]["image_rmse"] == 0.0
     assert rows[0]["image_rmse"] > rows[1]["image_rmse"] > 0
-    assert (tmp_path / "sw.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert _drawn((tmp_path / "sw.svg").read_text())[1]["list bytes in project.json"]["points"]
     assert json.loads((tmp_path / "sw.json").read_text())["error_metric"].startswith("Hausdorff")
 
 
@@ -172,22 +178,41 @@ def test_sweep_lighting_key_compares_colours_before_the_bsp_splits(tmp_path):
     assert all(r["bytes"] > 0 and "bsp" in r["stage_seconds"] for r in rows)
 
 
-def _plotted(table, monkeypatch):
-    """The figure ``plot`` draws (captured when it closes it)."""
-    import io
+def _drawn(svg: str) -> list[dict]:
+    """What each panel of a sweep's SVG plot draws: per series (by its label) the polyline's
+    points and the point markers' centres, in SVG pixels (x grows with the value on linear and
+    log axes alike)."""
+    import xml.etree.ElementTree as ET
 
-    import matplotlib.pyplot as plt
+    ns = "{http://www.w3.org/2000/svg}"
+    root = ET.fromstring(svg)
+    out = []
+    for panel in root.iter(ns + "g"):
+        if panel.get("class") != "panel":
+            continue
+        series = {}
+        for g in panel.iter(ns + "g"):
+            if g.get("class") != "series":
+                continue
+            line = [tuple(map(float, p.split(","))) for pl in g.iter(ns + "polyline")
+                    for p in pl.get("points").split()]
+            pts = []
+            for el in g:
+                if el.get("class") != "point":
+                    continue
+                if el.tag == ns + "circle":
+                    pts.append((float(el.get("cx")), float(el.get("cy"))))
+                elif el.tag == ns + "rect":
+                    pts.append((float(el.get("x")) + float(el.get("width")) / 2,
+                                float(el.get("y")) + float(el.get("height")) / 2))
+                else:
+                    pts.append(None)
+            series[g.get("data-label")] = {"line": line, "points": pts}
+        out.append(series)
+    return out
 
-    from bake.sweep import plot
 
-    figs = []
-    real_close = plt.close
-    monkeypatch.setattr(plt, "close", lambda fig=None: figs.append(fig) or real_close(fig))
-    plot(table, io.BytesIO())
-    return figs[-1]
-
-
-def test_sweep_plot_does_not_join_points_in_value_order_against_seconds(monkeypatch):
+def test_sweep_plot_does_not_join_points_in_value_order_against_seconds():
     """Noisy stage times must not zig-zag the error-against-seconds line (issue 17, item 9):
     every line drawn against seconds runs left to right, and joins only bakes no other bake
     beats on both time and error; every bake is still a point."""
@@ -198,19 +223,21 @@ def test_sweep_plot_does_not_join_points_in_value_order_against_seconds(monkeypa
             for i, (v, s, e) in enumerate(zip([16, 32, 64, 128, 256], secs, err))]
     table = {"key": "bsp.candidates", "rows": rows, "stages": ["bsp"], "error_key": "inflation",
              "error_metric": "split inflation", "reference": {"kind": "highest value"}}
-    fig = _plotted(table, monkeypatch)
-    for ax in fig.axes[:2]:  # the panels against seconds
+    from bake.sweep import plot
+
+    panels = _drawn(plot(table))
+    for series in panels[:2]:  # the panels against seconds
         points = 0
-        for ln in ax.get_lines():
-            xs = np.asarray(ln.get_xdata(), float)
-            if ln.get_linestyle() not in ("None", "none", "") and len(xs) > 1:
-                assert np.all(np.diff(xs) >= 0), f"a line against seconds goes back: {xs}"
-            if ln.get_marker() not in ("None", "none", "", None):
-                points = max(points, len(xs))
+        for name, drawn in series.items():
+            xs = [p[0] for p in drawn["line"]]
+            assert all(b >= a for a, b in zip(xs, xs[1:])), f"a line against seconds goes back: {name} {xs}"
+            points = max(points, len(drawn["points"]))
         assert points == len(rows)
     from bake.sweep import pareto_front
 
     # the front: 32 (0.31 s) dominates 16 (0.50 s, worse error); 128 (0.62 s) dominates 64
     assert pareto_front(np.array(secs), np.array(err)).tolist() == [1, 3, 4]
-    front = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "-"]
-    assert [list(ln.get_xdata()) for ln in front][0] == [0.31, 0.62, 2.10]
+    # the line joins the points of 32, 128 and 256 (0.31, 0.62 and 2.10 s), in that order
+    err = panels[0]["inflation"]["points"]
+    assert panels[0]["inflation: fastest for its error"]["line"] == [err[1], err[3], err[4]]
+    assert not panels[0]["inflation"]["line"]  # the points themselves are not joined

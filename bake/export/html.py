@@ -5,7 +5,7 @@ Built from the output folder alone (``report.json``, ``lists.json``, the written
 shows what Scratch will load: previews rendered from the rounded lists in the painter's order
 of the BSP walk next to a z-buffer render and their difference, textures and the lightmap
 decoded back from each encoding, a bar per Scratch limit, the stage table with effects run and
-skipped, and the sweep tables and plots. One self-contained file: images are embedded as PNG
+skipped, and the sweep tables and plots. One self-contained file: images are embedded as PNG (the sweep plots as SVG)
 data URIs, no script, no network -- except under ``bake watch`` (``write(..., live=True)``), which
 adds a few lines of script that reload the page when the watch writes a new one (see
 :func:`live_script`).
@@ -329,8 +329,11 @@ def load_sweeps(out_dir: Path) -> list[dict]:
             except (OSError, UnicodeDecodeError, json.JSONDecodeError):
                 continue
             if isinstance(table, dict) and "rows" in table and "key" in table:
-                png = j.with_suffix(".png")
-                out.append({"table": table, "png": png.read_bytes() if png.is_file() else None, "file": j.name})
+                # the plot: SVG (a PNG from a sweep written before the plot was SVG)
+                svg, png = j.with_suffix(".svg"), j.with_suffix(".png")
+                plot = (svg.read_bytes(), "image/svg+xml") if svg.is_file() else \
+                    (png.read_bytes(), "image/png") if png.is_file() else None
+                out.append({"table": table, "plot": plot, "file": j.name})
     return out
 
 
@@ -405,8 +408,8 @@ def _sweeps_section(sweeps: list[dict], report: dict | None = None) -> str:
                         f"<td class=n>{_fmt(r.get('seconds'))}</td><td class=n>{_fmt(r.get('total_seconds'))}</td>"
                         f"<td class=n>{_fmt(err)}</td><td class=n>{_fmt(r.get('image_rmse'))}</td>"
                         f"<td class=n>{_fmt(r.get('bytes'))}</td><td class=n>{_fmt(r.get('triangles'))}</td></tr>")
-        img = f"<img style='width:100%' alt='sweep {_esc(t['key'])}' src='{_bytes_uri(sw['png'])}'>" if sw["png"] \
-            else ""
+        img = f"<img style='width:100%' alt='sweep {_esc(t['key'])}' src='{_bytes_uri(*sw['plot'])}'>" \
+            if sw["plot"] else ""
         parts.append(f"<h3 style='font-size:14px'>{_esc(t['key'])} ({_esc(sw['file'])}; error: {_esc(metric)})"
                      f"</h3>{img}<table>{head}{''.join(rows)}</table>")
     return "".join(parts)

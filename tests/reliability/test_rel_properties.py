@@ -56,8 +56,14 @@ def hard_polygons(draw):
     at random, with optional out-of-plane noise. Returns (3-D points, unit normal, area, noise)."""
     n = draw(st.integers(3, 16))
     gaps = np.array(draw(st.lists(st.floats(1.0, 10.0), min_size=n, max_size=n)))
-    gaps = np.minimum(gaps / gaps.sum() * 2 * np.pi, 0.9 * np.pi)
-    ang = np.cumsum(gaps / gaps.sum() * 2 * np.pi)
+    gaps = gaps / gaps.sum() * 2 * np.pi
+    for _ in range(n):  # no gap of pi or more (else the polygon can wind the other way round)
+        over = gaps > 0.9 * np.pi
+        if not over.any():
+            break
+        gaps[~over] += (gaps[over] - 0.9 * np.pi).sum() / (~over).sum()
+        gaps[over] = 0.9 * np.pi
+    ang = np.cumsum(gaps)
     r = np.array(draw(st.lists(st.floats(0.2, 1.0), min_size=n, max_size=n)))
     xy = np.stack([r * np.cos(ang), r * np.sin(ang)], 1)
     k = draw(st.integers(0, n))  # corners inserted on edges

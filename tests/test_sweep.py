@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+import re
 
 import numpy as np
 import pytest
@@ -241,3 +243,28 @@ def test_sweep_plot_does_not_join_points_in_value_order_against_seconds():
     err = panels[0]["inflation"]["points"]
     assert panels[0]["inflation: fastest for its error"]["line"] == [err[1], err[3], err[4]]
     assert not panels[0]["inflation"]["line"]  # the points themselves are not joined
+
+
+def test_sweep_plot_of_degenerate_tables_is_valid_svg_without_nan():
+    """One row, missing figures, zero and infinite errors, zero seconds, a NaN estimate and markup
+    in the labels: still one well-formed SVG, with no NaN or infinity in its coordinates."""
+    import xml.etree.ElementTree as ET
+
+    from bake.sweep import plot
+
+    one = [{"value": 4, "seconds": 0.1, "total_seconds": 1, "error": None, "image_rmse": None, "bytes": None,
+            "reported_error": {}, "reference": True}]
+    odd = [{"value": v, "seconds": 0.0, "total_seconds": 0.0, "error": e, "rmse": e, "image_rmse": 0.0,
+            "bytes": 100, "reported_error": {"ao": float("nan")}, "components": {}, "reference": False}
+           for v, e in [(1, 0.0), (2, float("inf")), (1000, 1e-30)]]
+    for rows in (one, odd):
+        for key in ("lighting.ao.samples", "bsp.candidates"):
+            svg = plot({"key": key, "rows": rows, "stages": ["x"], "error_key": "rmse",
+                        "error_metric": "a < b & 'c'", "reference": {"kind": "highest value"}})
+            root = ET.fromstring(svg)
+            assert root.tag.endswith("svg")
+            for el in root.iter():  # every coordinate is a finite number
+                for name, val in el.attrib.items():
+                    if name in ("x", "y", "x1", "x2", "y1", "y2", "cx", "cy", "width", "height", "points", "d"):
+                        nums = [float(t) for t in re.findall(r"-?[0-9.]+(?:e-?[0-9]+)?|nan|inf", val, re.I)]
+                        assert nums and all(math.isfinite(v) for v in nums), (name, val)

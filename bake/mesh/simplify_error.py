@@ -6,11 +6,10 @@ Distances
 :meth:`SurfaceIndex.distance` (and :meth:`SurfaceIndex.query`) are exact: libigl's AABB tree
 over the mesh's triangles (``igl.AABB.squared_distance``, compiled; built on the first query)
 gives every point its closest triangle and squared distance. It replaced a KD-tree of points
-on the triangles whose candidates gave upper bounds (exact for all but a few points in ten
-thousand, which missed by up to 0.3% of the diagonal on the bunny): on the bunny, 200,000
-points against its 69,451 triangles take 0.33 s instead of 1.5 s, and the simplify stage to
-2,000 triangles went from about 4.7 s to 3.4 s (benchmarks/results/simplify_speed.json has the
-side-by-side figures).
+on the triangles whose candidates, with a walk to edge neighbours, gave upper bounds: exact for
+all but a few points in ten thousand (8 of 200,000 points near the bunny, which missed by up to
+0.13% of its diagonal). The simplify stage on the bunny to 2,000 triangles went from 3.70 s to
+2.41 s with it (benchmarks/results/simplify_speed.json, side by side, best of 3).
 
 A :class:`SurfaceIndex` still holds a scipy KD-tree over points on every triangle (its
 centroid, for small and mid-size meshes three points near its corners, and area-weighted
@@ -82,7 +81,6 @@ _BRUTE = 8
 _CHUNK = 1 << 16
 # KD-tree queries of fewer points than this run on one thread (starting threads costs more)
 _THREADED = 4096
-_IGL = True
 # exact point-triangle pairs one verification of a maximum may measure (the bunny at 1% needs
 # under 3,000; a soup of large intersecting triangles, whose candidate bounds are loose, needs
 # millions: past this budget the max is reported as the largest bound left, an upper bound)
@@ -265,7 +263,6 @@ class SurfaceIndex:
         self.k = k
         T = len(self.F)
         self._ball = None
-        self._nbr = None
         self._query_cache: dict = {}
         self._igl = None
         if T == 0:
@@ -395,71 +392,18 @@ class SurfaceIndex:
         n = len(P)
         if len(self.F) == 0 or n == 0:
             return np.full(n, np.inf), np.full(n, -1, np.int64)
-        if _IGL:
-            dist = np.empty(n)
-            tri = np.empty(n, np.int64)
-            tree = self._aabb()
-            for s in range(0, n, _CHUNK):
-                d2, t, _ = tree.squared_distance(self.V, self.F, np.ascontiguousarray(P[s:s + _CHUNK]))
-                dist[s:s + len(d2)] = np.sqrt(d2)
-                tri[s:s + len(d2)] = t
-            return dist, tri
         dist = np.empty(n)
         tri = np.empty(n, np.int64)
+        tree = self._aabb()
         for s in range(0, n, _CHUNK):
-            p = P[s:s + _CHUNK]
-            if len(self.F) <= _BRUTE:
-                cand, d2 = self._candidates(p)
-            else:
-                cand, d2, inside = self._candidates(p, want_inside=True)
-            j = np.argmin(d2, axis=1)
-            r = np.arange(len(cand))
-            best, t = d2[r, j], cand[r, j]
-            if len(self.F) > _BRUTE:
-                # points that project into their best triangle are done; the others (closest
-                # point on an edge or corner) may be closer to the triangle over that edge
-                edge = np.flatnonzero(~inside[r, j])
-                b, tt = best[edge], t[edge]
-                self._walk(p[edge], b, tt)
-                best[edge], t[edge] = b, tt
-            dist[s:s + len(cand)] = np.sqrt(best)
-            tri[s:s + len(cand)] = t
+            d2, t, _ = tree.squared_distance(self.V, self.F, np.ascontiguousarray(P[s:s + _CHUNK]))
+            dist[s:s + len(d2)] = np.sqrt(d2)
+            tri[s:s + len(d2)] = t
         return dist, tri
 
-    def _walk(self, P: np.ndarray, best: np.ndarray, tri: np.ndarray, steps: int = 3) -> None:
-        """Improve (in place) squared distances ``best`` and closest triangles ``tri`` by trying
-        the edge neighbours of each point's current triangle, a few steps (the KD-tree
-        candidates miss the closest triangle mostly when it is the next one over an edge)."""
-        if self._nbr is None:
-            F = self.F
-            a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
-            key = np.minimum(a, b) * (int(F.max()) + 1) + np.maximum(a, b)
-            order = np.argsort(key, kind="stable")
-            ks = key[order]
-            i = np.flatnonzero(ks[1:] == ks[:-1])
-            nbr = np.full(3 * len(F), -1, np.int64)
-            nbr[order[i]] = order[i + 1] // 3
-            nbr[order[i + 1]] = order[i] // 3
-            self._nbr = nbr.reshape(-1, 3)
-        todo = np.arange(len(P))
-        for _ in range(steps):
-            nb = self._nbr[tri[todo]]
-            ok = nb >= 0
-            rows, cols = np.nonzero(ok)
-            d2 = np.full(nb.shape, np.inf)
-            d2[rows, cols] = _pair_dist2(P[todo[rows]], np.take(self.table, nb[rows, cols], axis=1))
-            j = np.argmin(d2, axis=1)
-            r = np.arange(len(todo))
-            imp = d2[r, j] < best[todo]
-            if not imp.any():
-                break
-            todo, j = todo[imp], j[imp]
-            best[todo] = d2[r[imp], j]
-            tri[todo] = nb[r[imp], j]
-
     def query(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(distances (n,), closest triangle (n,), closest points (n,3)); distances are upper
-        bounds that are exact unless the KD-tree candidates miss the closest triangle."""
+        """(distances (n,), closest triangle (n,), closest points (n,3)); exact distances
+        (:meth:`distance`), the closest point computed on the triangle named."""
         P = np.asarray(P, np.float64).reshape(-1, 3)
         n = len(P)
         dist, tri = self.distance(P)

@@ -94,23 +94,27 @@ class Axes:
         ox, oy = x0 + left, y0 + top
         xr, yr = self._range(self.xlog, 0), self._range(self.ylog, 1)
 
-        def px(x: float) -> float:
-            v = math.log10(x) if self.xlog else x
+        def tx(v: float) -> float:  # x in the axis's own units (log10 on a log axis) -> pixels
             return ox + (v - xr[0]) / (xr[1] - xr[0]) * w
 
-        def py(y: float) -> float:
-            v = math.log10(y) if self.ylog else y
+        def ty(v: float) -> float:
             return oy + h - (v - yr[0]) / (yr[1] - yr[0]) * h
+
+        def px(x: float) -> float:  # a data value -> pixels
+            return tx(math.log10(x) if self.xlog else x)
+
+        def py(y: float) -> float:
+            return ty(math.log10(y) if self.ylog else y)
 
         out = [f"<g class='panel'><rect x='{ox:.1f}' y='{oy:.1f}' width='{w:.1f}' height='{h:.1f}' "
                "fill='white' stroke='#444' stroke-width='0.8'/>"]
         for v, text in _ticks(xr, self.xlog):
-            x = ox + (v - xr[0]) / (xr[1] - xr[0]) * w
+            x = tx(v)
             out.append(f"<line x1='{x:.1f}' y1='{oy:.1f}' x2='{x:.1f}' y2='{oy + h:.1f}' stroke='#ddd' "
                        "stroke-width='0.6'/>")
             out.append(_text(x, oy + h + 13, text, anchor="middle", size=9))
         for v, text in _ticks(yr, self.ylog):
-            y = oy + h - (v - yr[0]) / (yr[1] - yr[0]) * h
+            y = ty(v)
             out.append(f"<line x1='{ox:.1f}' y1='{y:.1f}' x2='{ox + w:.1f}' y2='{y:.1f}' stroke='#ddd' "
                        "stroke-width='0.6'/>")
             out.append(_text(ox - 4, y + 3, text, anchor="end", size=9))

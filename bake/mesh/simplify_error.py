@@ -202,8 +202,6 @@ def _pair_dist2(P: np.ndarray, D: np.ndarray, want_point: bool = False):
         pick2 = dd < best
         best = np.minimum(best, dd)
     d2 = np.where(inside, h * h, best)
-    if want_point == "inside":
-        return d2, inside
     if not want_point:
         return d2
     # closest point as A + s AB + r AC
@@ -341,11 +339,10 @@ class SurfaceIndex:
             self._reliable = reliable_normals(self.V, self.F, self.scale)
         return self._reliable
 
-    def _candidates(self, P: np.ndarray, want_inside: bool = False):
+    def _candidates(self, P: np.ndarray):
         """(m, k) candidate triangles (duplicates in a row replaced by -1) and squared exact
-        distances (inf where -1); with ``want_inside`` also whether each point projects into
-        its candidate (closest point inside, not on an edge). Meshes of at most ``_BRUTE``
-        triangles: every triangle is a candidate (no ``inside``)."""
+        distances (inf where -1). Meshes of at most ``_BRUTE`` triangles: every triangle is a
+        candidate."""
         m = len(P)
         T = len(self.F)
         if T <= _BRUTE:  # a handful of triangles: every one is a candidate
@@ -369,12 +366,8 @@ class SurfaceIndex:
         keep = np.flatnonzero(~dup.ravel())
         d2 = np.full(m * k, np.inf)
         rows = keep // k
-        d2[keep], ins = _pair_dist2(P[rows], np.take(self.table, cand.ravel()[keep], axis=1), "inside")
-        if not want_inside:
-            return cand, d2.reshape(m, k)
-        inside = np.zeros(m * k, bool)
-        inside[keep] = ins
-        return cand, d2.reshape(m, k), inside.reshape(m, k)
+        d2[keep] = _pair_dist2(P[rows], np.take(self.table, cand.ravel()[keep], axis=1))
+        return cand, d2.reshape(m, k)
 
     def _aabb(self):
         """libigl's AABB tree over the triangles (built on first use)."""

@@ -132,7 +132,7 @@ class BSPConfig:
     coplanar_weight: float = 0.0
     # planes through an edge of one face and a corner of another, per node (0 = face planes only);
     # used only where their cuts add at most edge_plane_cost triangles per face of the node
-    edge_planes: int = 64
+    edge_planes: int = 256
     edge_plane_cost: float = 0.3
     # nodes of more faces score every candidate on a sample of this many (0 = all of them) and
     # rescore the best score_refine on all
@@ -146,7 +146,7 @@ class BSPConfig:
     # the ensembles above and thorough_edge_factor times edge_planes per node; bigger scenes are
     # built greedily (no ensembles, edge_planes) (0 = never thorough)
     thorough_faces: int = 8000
-    thorough_edge_factor: int = 2
+    thorough_edge_factor: int = 1
     seed: int = 0
     # Leaves: "priority" (sets drawn in a fixed order valid from every viewpoint, plus peeling),
     # "convex" (only sets in which no face can hide another), "none" (classic BSP).

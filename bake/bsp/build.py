@@ -62,7 +62,7 @@ class BuildOptions:
     # along a diagonal) or "pieces" (1 per fragment cut, the classic count)
     hull_peel: bool = True  # peel the convex-hull faces of sets larger than leaf_max
     peeled_candidates: bool = True  # planes of peeled fragments are candidates for the core
-    edge_planes: int = 64  # planes through an edge of one fragment and a corner of another
+    edge_planes: int = 256  # planes through an edge of one fragment and a corner of another
     edge_plane_cost: float = 0.3  # ... used only where their cuts add <= this many triangles per fragment
     score_sample: int = 512  # larger nodes pre-score candidates on this many fragments ...
     score_refine: int = 4  # ... and rescore their best few exactly
@@ -71,7 +71,7 @@ class BuildOptions:
     # the thorough search (ensembles, thorough_edge_factor x edge_planes) in scenes of at most
     # thorough_faces source faces (0: never); bigger scenes are built greedily
     thorough_faces: int = 8000
-    thorough_edge_factor: int = 2
+    thorough_edge_factor: int = 1
     fragments: str = "polygons"  # "fans": triangulate every cut piece at once (for comparison)
 
 
@@ -262,6 +262,9 @@ def hull_peel(store: FaceStore, ids: np.ndarray, eps: float, hull_above: int = 5
 
 
 KIND_FACE, KIND_EDGE, KIND_GAP, KIND_AXIS = 0, 1, 2, 3
+#: nodes with at least this many (fragment, candidate) pairs are scored as one block
+_BLOCK_PAIRS = 1024
+
 KIND_NAMES = {KIND_FACE: "face_planes", KIND_EDGE: "edge_planes", KIND_GAP: "gap_planes", KIND_AXIS: "axis_planes"}
 
 
@@ -413,20 +416,113 @@ class _Builder:
         """Scores of candidate planes: candidate i against the fragments ``fpos[foff[a] :
         foff[a] + fcount[a]]`` of its node ``a`` (all of them, or a sample whose counts are
         scaled up to the node's size). ``Pc`` (3, K, L) float32 corners of the level's
-        fragments. Returns (score, cost); inf where the plane makes no progress."""
+        fragments. ``c_node`` is sorted. Returns (score, cost); inf where the plane makes no
+        progress.
+
+        Nodes with at least ``_BLOCK_PAIRS`` (fragment, candidate) pairs are counted as a
+        fragments x candidates block (``_count_block``: the corners gathered once, the
+        planes broadcast); the rest as one flat list of pairs (``_count_flat``). Both do the
+        same float32 operations in the same order, so the counts do not depend on the path."""
         opt = self.opt
-        eps = np.float32(opt.epsilon)
-        exact = opt.split_cost == "triangles"
         n_c = len(c_node)
         sc = np.full(n_c, np.inf)
         cost_out = np.zeros(n_c)
         if n_c == 0:
             return sc, cost_out
-        ln = fcount[c_node].astype(np.int64)
+        comp = np.ascontiguousarray(c_plane.T, dtype=np.float32)  # (4, n_c)
+        lc = fcount[c_node].astype(np.int64)
+        counts = np.zeros((4, n_c))  # n_b, n_f, n_sp, cost (sampled)
+        bounds = np.flatnonzero(np.diff(c_node)) + 1
+        first = np.concatenate([[0], bounds])
+        last = np.concatenate([bounds, [n_c]])
+        block = (last - first) * lc[first] >= _BLOCK_PAIRS
+        for j0, j1 in zip(first[block], last[block]):
+            a = int(c_node[j0])
+            f = fpos[foff[a]:foff[a] + fcount[a]]
+            counts[:, j0:j1] = self._count_block(Pc, deg, cnt, f, comp[:, j0:j1])
+        flat = np.flatnonzero(np.repeat(~block, last - first))
+        if len(flat):
+            counts[:, flat] = self._count_flat(Pc, deg, cnt, c_node[flat], comp[:, flat], fpos, foff, lc[flat])
+        n_b, n_f, n_sp, cost = counts
+        m = sizes[c_node].astype(np.float64)
+        f_ = m / lc  # sampled counts stand for the whole node
+        fr, bk = (n_f - n_sp) * f_, (n_b - n_sp) * f_
+        on_n = (lc - n_b - n_f + n_sp) * f_
+        cost = cost * f_
+        s_ = opt.split_weight * cost + opt.balance_weight * np.abs(fr - bk) - opt.coplanar_weight * on_n
+        progress = (on_n > 0) | ((fr > 0) & (bk > 0))
+        progress &= (c_kind != KIND_EDGE) | (cost <= opt.edge_plane_cost * m)
+        sc[:] = np.where(progress, s_, np.inf)
+        cost_out[:] = cost
+        return sc, cost_out
+
+    def _classify(self, mn, mx, on_c, dg, axis=None):
+        """(behind, in front, straddling, added triangles) counts from the per-pair extremes of
+        the corners' signed distances; reduced over ``axis`` (block) or returned per pair."""
+        eps = np.float32(self.opt.epsilon)
+        has_b, has_f = mn < -eps, mx > eps
+        if dg.any():  # degenerate fragments are never cut: they go with their middle
+            fix = has_b & has_f & dg
+            ahead = (mn + mx) >= 0
+            has_b &= ~(fix & ahead)
+            has_f &= ~(fix & ~ahead)
+        span = has_b & has_f
+        if self.opt.split_cost == "triangles":
+            cost = np.where(span, np.maximum(0, 2 - on_c), 0)
+        else:
+            cost = span
+        if axis is None:
+            return has_b, has_f, span, cost
+        return [x.sum(axis=axis, dtype=np.int64) for x in (has_b, has_f, span, cost)]
+
+    def _count_block(self, Pc, deg, cnt, f, pl):
+        """Counts of the candidates ``pl`` (4, C) of one node against its fragments ``f``."""
+        eps = np.float32(self.opt.epsilon)
+        a, b, c, w = (pl[i][None, :] for i in range(4))
+        shape = (len(f), pl.shape[1])
+        d, tmp = np.empty(shape, np.float32), np.empty(shape, np.float32)
+        mn, mx = np.empty(shape, np.float32), np.empty(shape, np.float32)
+        on_c = np.zeros(shape, np.int8)
+        onb = np.empty(shape, bool)
+        fc = cnt[f]
+        for k in range(Pc.shape[1]):
+            if k < 3:
+                q = Pc[:, k, f][..., None]  # (3, F, 1)
+                np.multiply(a, q[0], out=d)
+                np.multiply(b, q[1], out=tmp)
+                d += tmp
+                np.multiply(c, q[2], out=tmp)
+                d += tmp
+                d -= w
+                np.abs(d, out=tmp)
+                np.less_equal(tmp, eps, out=onb)
+                if k == 0:
+                    mn[:] = d
+                    mx[:] = d
+                else:
+                    np.minimum(mn, d, out=mn)
+                    np.maximum(mx, d, out=mx)
+                on_c += onb
+            else:
+                sel = np.flatnonzero(fc > k)
+                if len(sel) == 0:
+                    break
+                q = Pc[:, k, f[sel]][..., None]
+                ds = a * q[0] + b * q[1] + c * q[2] - w
+                mn[sel] = np.minimum(mn[sel], ds)
+                mx[sel] = np.maximum(mx[sel], ds)
+                on_c[sel] += np.abs(ds) <= eps
+        return np.array(self._classify(mn, mx, on_c, deg[f][:, None], axis=0), np.float64)
+
+    def _count_flat(self, Pc, deg, cnt, c_node, comp, fpos, foff, ln):
+        """Counts of candidates (planes ``comp`` (4, n), nodes ``c_node``) against their nodes'
+        fragments, as flat lists of (fragment, candidate) pairs in chunks of about 1.5M pairs."""
+        eps = np.float32(self.opt.epsilon)
+        n_c = len(c_node)
+        out = np.zeros((4, n_c))
         cum = np.cumsum(ln)
         K = Pc.shape[1]
         budget = 1_500_000
-        comp = np.ascontiguousarray(c_plane.T, dtype=np.float32)  # (4, n_c)
         i0 = 0
         while i0 < n_c:
             i1 = max(i0 + 1, int(np.searchsorted(cum, cum[i0] - ln[i0] + budget, "right")))
@@ -471,32 +567,10 @@ class _Builder:
                     mn[sel] = np.minimum(mn[sel], ds)
                     mx[sel] = np.maximum(mx[sel], ds)
                     on_c[sel] += np.abs(ds) <= eps
-            has_b, has_f = mn < -eps, mx > eps
-            dg = deg[f]
-            if dg.any():  # degenerate fragments are never cut: they go with their middle
-                fix = has_b & has_f & dg
-                ahead = (mn + mx) >= 0
-                has_b &= ~(fix & ahead)
-                has_f &= ~(fix & ~ahead)
-            span = has_b & has_f
-            n_b = np.add.reduceat(has_b, seg, dtype=np.int64).astype(np.float64)
-            n_f = np.add.reduceat(has_f, seg, dtype=np.int64).astype(np.float64)
-            n_sp = np.add.reduceat(span, seg, dtype=np.int64).astype(np.float64)
-            cost = n_sp if not exact else np.add.reduceat(
-                np.where(span, np.maximum(0, 2 - on_c), 0), seg, dtype=np.int64).astype(np.float64)
-            m = sizes[cn].astype(np.float64)
-            f_ = m / lc  # sampled counts stand for the whole node
-            fr, bk = (n_f - n_sp) * f_, (n_b - n_sp) * f_
-            on_n = (lc - n_b - n_f + n_sp) * f_
-            cost *= f_
-            s_ = opt.split_weight * cost + opt.balance_weight * np.abs(fr - bk) - opt.coplanar_weight * on_n
-            progress = (on_n > 0) | ((fr > 0) & (bk > 0))
-            kd = c_kind[i0:i1]
-            progress &= (kd != KIND_EDGE) | (cost <= opt.edge_plane_cost * m)
-            sc[i0:i1] = np.where(progress, s_, np.inf)
-            cost_out[i0:i1] = cost
+            for r, x in enumerate(self._classify(mn, mx, on_c, deg[f])):
+                out[r, i0:i1] = np.add.reduceat(x, seg, dtype=np.int64)
             i0 = i1
-        return sc, cost_out
+        return out
 
     def choose(self, fids, owner, starts, rng, extra=None, extra_owner=None):
         """One plane per open node: the best-scored of its candidates. Nodes larger than

@@ -44,12 +44,28 @@ def test_every_search_option_keeps_the_order(kw):
 def test_edge_planes_are_chosen_and_pass_through_their_edge():
     sc = load_scene("suzanne") if corpus_file("suzanne").exists() else interlocked_scene()
     new, rec = stage(sc, _cfg())
-    assert rec.details["options"]["edge_planes"] == 64
+    assert rec.details["options"]["edge_planes"] == _cfg().edge_planes
     # the builder's statistics count the planes of each kind it chose
     from bake.bsp.stage import build, options
 
     store, src, tree, enc, _ = build(sc, options(_cfg()))
     assert tree.stats["edge_planes"] > 0 and tree.stats["face_planes"] > 0
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_block_and_flat_scoring_give_the_same_tree(monkeypatch, seed):
+    """Big nodes are scored as fragments x candidates blocks, small ones as flat pair lists
+    (bake.bsp.build._BLOCK_PAIRS); both paths must give the same counts, so forcing either one
+    everywhere builds the same tree, fragment for fragment."""
+    import bake.bsp.build as bb
+
+    sc = interlocked_scene(seed=seed)
+    outs = []
+    for pairs in (0, 1 << 62):
+        monkeypatch.setattr(bb, "_BLOCK_PAIRS", pairs)
+        new, rec = stage(sc, _cfg(thorough_faces=0))
+        outs.append((new.positions.tobytes(), new.triangles.tobytes(), rec.details["tree_depth"]))
+    assert outs[0] == outs[1]
 
 
 def test_ensemble_grafts_complete_subtrees_deterministically():

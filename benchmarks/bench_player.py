@@ -1,6 +1,6 @@
 """The reader sprite in the players, side by side with the previous reader: bytes, blocks, seconds.
 
-    .venv/bin/python benchmarks/bench_player.py [--repeat 5] [--base 6f0151f] [--models demo,teapot]
+    .venv/bin/python benchmarks/bench_player.py [--repeat 40] [--base 6f0151f] [--models demo,teapot]
 
 For each model (the bundled demo, and the Utah teapot lit by a sun and BSP-sorted), the same
 input and config are baked twice in this run: by this checkout, and by the previous reader's code
@@ -19,6 +19,9 @@ archive`` into a temporary folder and run from there, nothing of it is kept). Fo
   tick; the minimum over the rounds after the first, since other processes only add time; all
   pages open at once and run in rounds, so both readers see the same load). Every run is in the
   JSON, with the median of per-round ratios;
+* the new project again with TurboWarp's fencing left on (the stage's settings comment that
+  ``export.turbowarp_fencing = false`` writes removed), in the same interleaved rounds: what
+  turning fencing off buys (``new_fencing_on`` in the JSON);
 * the image agreement of the new reader's stage with the green flag preview
   (``bake.export.preview.stage_agreement``).
 
@@ -120,6 +123,24 @@ def vm_blocks(paths: list[Path], phases: list[bool]) -> list[dict]:
     return res
 
 
+def without_settings_comment(src: Path, dst: Path) -> Path:
+    """A copy of the .sb3 ``src`` whose stage has no TurboWarp settings comment (fencing on)."""
+    import zipfile
+
+    with zipfile.ZipFile(src) as z:
+        files = {n: z.read(n) for n in z.namelist()}
+    project = json.loads(files["project.json"])
+    stage = next(t for t in project["targets"] if t.get("isStage"))
+    if sb3.turbowarp_settings(stage.get("comments") or {}) is None:
+        raise SystemExit(f"{src}: no TurboWarp settings comment to remove")
+    stage["comments"] = {}
+    files["project.json"] = sb3.dumps(project).encode("utf-8")
+    with zipfile.ZipFile(dst, "w") as z:
+        for n in sorted(files):
+            z.writestr(n, files[n])
+    return dst
+
+
 def frame_seconds(xs: list[float]) -> float:
     """The least disturbed frame: the minimum over the runs after the first (the first compiles).
     On a shared machine other processes only ever add time, so the minimum is the estimate of a
@@ -136,7 +157,7 @@ def paired(prev: list[float], new: list[float]) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--repeat", type=int, default=5, help="green flags per project and mode")
+    ap.add_argument("--repeat", type=int, default=40, help="green flags per project and mode (the steady frame: the minimum over rounds 2.., which settles after about 30)")
     ap.add_argument("--base", default="6f0151f", help="commit of the previous reader")
     ap.add_argument("--fresh", type=int, default=5, help="fresh page loads per project and mode for the first frame")
     ap.add_argument("--models", default="demo,teapot")
@@ -180,7 +201,11 @@ def main() -> None:
             results["models"].append(row)
         for (name, who, out), vmres in zip(baked, vm_blocks([b[2] for b in baked], [b[1] == "new" for b in baked])):
             next(r for r in results["models"] if r["model"] == name)[who].update(vmres)
-        run = turbowarp.run([(f"{n}-{w}", p) for n, w, p in baked], modes=("compiled", "interpreted"),
+        # the new project with TurboWarp's fencing left on (its stage's settings comment removed),
+        # in the same interleaved rounds: what export.turbowarp_fencing = false buys
+        fenced = [(f"{n}-fenced", without_settings_comment(p, tmp / f"{n}-fenced.sb3")) for n, w, p in baked
+                  if w == "new"]
+        run = turbowarp.run([(f"{n}-{w}", p) for n, w, p in baked] + fenced, modes=("compiled", "interpreted"),
                             repeat=args.repeat, interleave=True)
         results["versions"] = run.versions
         # the first frame: a freshly loaded page, one green flag (compiling the scripts and a cold
@@ -224,6 +249,18 @@ def main() -> None:
                     d.line([(487, 0), (487, 359)], fill=(200, 200, 200))
                     Path(args.screenshot).parent.mkdir(parents=True, exist_ok=True)
                     im.save(args.screenshot, optimize=True)
+        for row in results["models"]:
+            row["new_fencing_on"] = {}
+            for mode in ("compiled", "interpreted"):
+                r = run.get(f"{row['model']}-fenced", mode)
+                row["new_fencing_on"][mode] = {"seconds": r.seconds, "step_seconds": r.step_seconds,
+                                               "frame_seconds": frame_seconds(r.step_seconds),
+                                               "runtime_options": r.runtime_options}
+                new_r = run.get(f"{row['model']}-new", mode)
+                row["new"][mode]["runtime_options"] = new_r.runtime_options
+                row["new_fencing_on"][f"{mode}_over_new"] = (frame_seconds(r.step_seconds)
+                                                             / row["new"][mode]["frame_seconds"])
+                row["new_fencing_on"][f"{mode}_over_new_paired"] = paired(r.seconds, new_r.seconds)
         for row in results["models"]:
             n, p = row["new"], row["previous"]
             row["ratio_previous_to_new"] = {
@@ -271,6 +308,11 @@ def main() -> None:
             print(f"  {row['model']} {mode}: interior within 1 level {a['within_1']:.4f} of {a['interior_pixels']:,}, "
                   f"covered within 1 level {a['covered_within_1']:.4f} of {a['covered_inner_pixels']:,}, "
                   f"blank interior {a['interior_left_blank']}, painted empty {a['empty_painted']}")
+    for row in results["models"]:
+        f = row["new_fencing_on"]
+        print(f"{row['model']}: new with TurboWarp's fencing on: compiled {f['compiled']['frame_seconds']:.4f} s "
+              f"({f['compiled_over_new']:.2f}x the new frame; paired {f['compiled_over_new_paired']:.2f}x), "
+              f"interpreted {f['interpreted']['frame_seconds']:.4f} s ({f['interpreted_over_new']:.2f}x)")
     for row in results["models"]:
         n = row["new"]
         if "blocks_bsp_walk" in n:

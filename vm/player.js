@@ -34,6 +34,7 @@
  *                    "running":       threads still running at the end (0 when done)} ],
  *         "snapshot": "DIR/<id>-<mode>.png" | null, "stage": [width, height] of the snapshot,
  *         "lists": {...}, "variables": {...},        // what "read" asked for
+ *         "runtimeOptions": {...},                   // vm.runtime.runtimeOptions after the last run
  *         "errors": [ "console error: ...", "page error: ...", "request blocked: URL", ... ] } ] }
  * Exit status: 0; 3 if the harness itself failed (the JSON then has "error"); 2 on bad arguments.
  *
@@ -303,6 +304,8 @@ async function finishOne (one, plan, baseDir) {
             await page.bringToFront(); // a hidden page does not draw: the snapshot would never come
             await sleep(40);
             if (plan.read) Object.assign(res, await page.evaluate(pageRead, plan.read));
+            // the runtime options in force (the project's TurboWarp settings comment applied)
+            res.runtimeOptions = await page.evaluate(() => Object.assign({}, window.vm.runtime.runtimeOptions));
             const url = await page.evaluate(pageSnapshot);
             const png = Buffer.from(url.slice(url.indexOf(',') + 1), 'base64');
             res.stage = [png.readUInt32BE(16), png.readUInt32BE(20)];

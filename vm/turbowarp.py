@@ -96,6 +96,7 @@ class Result:
     snapshot: str | None
     lists: dict[str, list] = field(default_factory=dict)
     variables: dict[str, Any] = field(default_factory=dict)
+    runtime_options: dict[str, Any] = field(default_factory=dict)  # the VM's, after the last run
     image: np.ndarray | None = None  # (H, W, 3) uint8, the stage after the last run
 
     @property
@@ -169,7 +170,7 @@ def run(projects: Sequence[str | Path | tuple[str, str | Path]], *, modes: Seque
             res = Result(id=x["id"], file=x["file"], mode=x["mode"], runs=x["runs"], errors=x["errors"],
                          stage=tuple(x["stage"]) if x.get("stage") else None,
                          snapshot=x["snapshot"] if snapshots else None, lists=x.get("lists") or {},
-                         variables=x.get("variables") or {})
+                         variables=x.get("variables") or {}, runtime_options=x.get("runtimeOptions") or {})
             if x.get("snapshot") and Path(x["snapshot"]).is_file():
                 res.image = read_png(Path(x["snapshot"]).read_bytes())
             results.append(res)

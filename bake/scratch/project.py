@@ -170,7 +170,11 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
             sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=list(stored), demo=True)
         else:
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
-        targets = [sb3.Target("Stage", is_stage=True, lists=stored), sprite]
+        stage = sb3.Target("Stage", is_stage=True, lists=stored)
+        if not bool(_cfg(cfg, "turbowarp_fencing", True)):
+            stage.comments[sb3.TW_CONFIG_COMMENT_ID] = sb3.turbowarp_settings_comment(
+                {"runtimeOptions": {"fencing": False}})
+        targets = [stage, sprite]
         if costumes:  # the texture costumes, in a hidden sprite of their own for stamping engines
             targets.append(sb3.Target("Textures", costumes=list(costumes), layer_order=2, visible=False))
         data, pj_bytes = sb3.write_sb3(targets)

@@ -63,7 +63,9 @@ numbers) is in front of ``near`` and its picture within those 4000 pixels; only 
 tests each vertex (the list ``_bad``). The filler draws the outline (pen size 2: everything
 within half a pixel of an edge is covered fully) and a fan of lines from the first corner, ``n - 1``
 of them with ``n = ceiling(L - L^2 / (2 * area2))`` for the opposite edge's length ``L``, which
-leaves no point farther than half a pixel from a line.
+leaves no point farther than half a pixel from a line. The BSP stage puts each triangle's corner
+opposite its shortest edge first (``bake.bsp.stage.apex_first``), so ``L`` is short and the fan
+has few lines.
 
 What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
 ``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.

@@ -122,6 +122,7 @@ class Target:
     visible: bool = True
     current_costume: int = 0
     id_length: int = 20  # characters of the variable and list ids (derived from the names)
+    comments: dict[str, Any] = field(default_factory=dict)  # workspace comments (id -> comment JSON)
 
     def to_json(self) -> dict[str, Any]:
         costumes = self.costumes or [Costume("backdrop1" if self.is_stage else "costume1",
@@ -132,7 +133,7 @@ class Target:
             "isStage": self.is_stage, "name": self.name,
             "variables": {var_ids[k]: [k, v] for k, v in self.variables.items()},
             "lists": {list_ids[k]: [k, v] for k, v in self.lists.items()},
-            "broadcasts": {}, "blocks": self.blocks, "comments": {},
+            "broadcasts": {}, "blocks": self.blocks, "comments": dict(self.comments),
             "currentCostume": self.current_costume, "costumes": [c.to_json() for c in costumes], "sounds": [],
             "volume": 100, "layerOrder": self.layer_order,
         }
@@ -150,6 +151,38 @@ class Target:
                 seen.setdefault(c.asset.md5ext, c.asset)
             return list(seen.values())
         return [Asset(BACKDROP_SVG if self.is_stage else SPRITE_SVG, "svg")]
+
+
+#: TurboWarp's project settings live in a workspace comment of the stage whose text has a line
+#: ending in this marker, the settings' JSON before it (TurboWarp's scratch-vm,
+#: ``Runtime.parseProjectOptions``, applies it when it loads the project; Scratch shows a comment)
+TW_CONFIG_MARKER = " // _twconfig_"
+TW_CONFIG_COMMENT_ID = "twconfig"
+
+
+def turbowarp_settings_comment(settings: dict[str, Any]) -> dict[str, Any]:
+    """The stage comment that stores ``settings`` (e.g. ``{"runtimeOptions": {"fencing":
+    False}}``: only the keys to change; TurboWarp keeps its defaults for the rest) as TurboWarp's
+    project settings."""
+    text = ("TurboWarp settings, written by scratch-bake (export.turbowarp_fencing). TurboWarp applies "
+            "the last line when it loads the project; Scratch ignores it. Delete this comment to go "
+            "back to TurboWarp's defaults.\n"
+            + json.dumps(settings, separators=(",", ":"), sort_keys=True, allow_nan=False) + TW_CONFIG_MARKER)
+    return {"blockId": None, "x": 0, "y": 0, "width": 350, "height": 170, "minimized": False, "text": text}
+
+
+def turbowarp_settings(comments: dict[str, Any]) -> dict[str, Any] | None:
+    """The TurboWarp settings a target's comments store (parsed the way TurboWarp parses them:
+    the first line ending in the marker), or None."""
+    for c in comments.values():
+        for line in str((c or {}).get("text", "")).split("\n"):
+            if line.endswith(TW_CONFIG_MARKER):
+                try:
+                    out = json.loads(line[:-len(TW_CONFIG_MARKER)])
+                except ValueError:
+                    return None
+                return out if isinstance(out, dict) else None
+    return None
 
 
 def dumps(obj: Any) -> str:

@@ -189,7 +189,8 @@ def test_empty_and_single_triangle_scenes():
     one = make_scene([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     new, rec = stage(one, _cfg())
     assert list(new.lists[NODES_LIST].values) == [0, 1, 1]  # one leaf holding triangle 1
-    assert new.n_triangles == 1 and (new.triangles == one.triangles).all()
+    # the same triangle, the same winding, turned so that corner 0 faces the shortest edge (1-2)
+    assert new.n_triangles == 1 and new.triangles.tolist() == [[1, 2, 0]]
 
 
 def test_config_keys_reach_the_builder():
@@ -217,3 +218,30 @@ def test_every_leaf_mode_gives_a_valid_cover(leaves):
     assert (seen[1:] == 1).all()
     if leaves == "none":
         assert rec.details["peeled_fragments"] == 0
+
+
+def test_corner_zero_faces_the_shortest_edge_and_corner_data_turns_with_it():
+    """The stage turns each output triangle so that corner 0 is opposite its shortest edge (the
+    reader's fan starts there); UVs and lightmap UVs must turn with their corners. Here both are
+    affine functions of the position, so every corner's UV must still be that function of its
+    own vertex, also on cut pieces (their UVs are interpolated along the cut edges)."""
+    sc = interlocked_scene(seed=3)
+    P = sc.positions[sc.triangles]  # (T, 3, 3)
+    uv = np.stack([P[..., 0] + 0.5 * P[..., 2], P[..., 1] - 0.25 * P[..., 0]], -1)
+    lm = np.stack([0.3 * P[..., 2] + 0.1, 0.2 * P[..., 0] + P[..., 1]], -1)
+    sc = sc.replace(tri_uvs=uv, tri_lightmap_uvs=lm)
+    new, rec = stage(sc, _cfg())
+    assert rec.details["splits"] > 0  # cut pieces are part of the check
+    Q = new.positions[new.triangles]
+    np.testing.assert_allclose(new.tri_uvs[..., 0], Q[..., 0] + 0.5 * Q[..., 2], atol=1e-9)
+    np.testing.assert_allclose(new.tri_uvs[..., 1], Q[..., 1] - 0.25 * Q[..., 0], atol=1e-9)
+    np.testing.assert_allclose(new.tri_lightmap_uvs[..., 0], 0.3 * Q[..., 2] + 0.1, atol=1e-9)
+    np.testing.assert_allclose(new.tri_lightmap_uvs[..., 1], 0.2 * Q[..., 0] + Q[..., 1], atol=1e-9)
+    e = [((Q[:, (k + 2) % 3] - Q[:, (k + 1) % 3]) ** 2).sum(-1) for k in range(3)]  # opposite corner k
+    assert (e[0] <= e[1]).all() and (e[0] <= e[2]).all()
+    # the winding is kept: every triangle faces the way its source triangle faced
+    n_new = np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
+    src = new.artefacts["bsp"]["source_triangle"]
+    n_src = np.cross(P[src, 1] - P[src, 0], P[src, 2] - P[src, 0])
+    big = np.linalg.norm(n_new, axis=1) > 1e-9
+    assert ((n_new * n_src).sum(1)[big] > 0).all()

@@ -95,6 +95,14 @@ def test_every_project_runs_without_errors_and_draws(played):
         assert r.runs[0]["seconds"] > 0
 
 
+def test_turbowarp_applies_the_projects_settings_comment(played):
+    """The fresh .sb3 stores fencing = false as TurboWarp's settings comment (export.turbowarp_fencing,
+    default false): TurboWarp's runtime must have it in force, its other options untouched."""
+    for r in played["run"].results:
+        assert r.runtime_options.get("fencing") is False, f"{r.id} {r.mode}: {r.runtime_options}"
+        assert r.runtime_options.get("maxClones") == 300  # Scratch's clone limit: still TurboWarp's default
+
+
 def test_the_stage_agrees_with_the_green_flag_preview(played):
     for r in played["run"].results:
         view, painter = played["previews"][r.id]

@@ -141,3 +141,30 @@ def test_reader_off_and_reader_needing_the_stage(tmp_path):
     assert [t["name"] for t in project["targets"]] == ["Stage", "Hero"]
     assert {v[0] for v in project["targets"][1]["lists"].values()} == {"verts", "tris", "mat colors"}
     assert engine.resolve() in [p.resolve() for p in res.scene.source.files_read]
+
+
+def test_turbowarp_fencing_setting_only_in_the_fresh_project(tmp_path):
+    """By default the fresh .sb3 stores TurboWarp's settings comment turning fencing off (parsed
+    here the way TurboWarp parses it); the .sprite3 and an export.into project never get it, and
+    export.turbowarp_fencing = true leaves it out. tests/player/test_turbowarp.py checks that
+    TurboWarp itself applies it."""
+    from scratch_models import bake
+
+    model = corpus_path("cube_quads_mtl", "cube.obj")
+    engine = _engine(tmp_path / "engine.sb3")
+    res = bake(model, export={"into": str(engine)})
+    files = res.scene.artefacts["outputs"]
+    project, _ = sb3.load_project(files["cube.sb3"])
+    stage = project["targets"][0]
+    assert sb3.turbowarp_settings(stage["comments"]) == {"runtimeOptions": {"fencing": False}}
+    line = stage["comments"][sb3.TW_CONFIG_COMMENT_ID]["text"].split("\n")[-1]
+    assert line.endswith(" // _twconfig_") and json.loads(line[:-len(" // _twconfig_")])["runtimeOptions"] == {
+        "fencing": False}
+    assert all(t["comments"] == {} for t in project["targets"][1:])
+    sprite, _ = sb3.load_sprite(files["cube.sprite3"])
+    assert sprite["comments"] == {}
+    merged, _ = sb3.load_project(files["engine-cube.sb3"])
+    assert all(sb3.turbowarp_settings(t.get("comments") or {}) is None for t in merged["targets"])
+    res = bake(model, export={"turbowarp_fencing": True})
+    project, _ = sb3.load_project(res.scene.artefacts["outputs"]["cube.sb3"])
+    assert project["targets"][0]["comments"] == {}

@@ -392,8 +392,8 @@ class ExportConfig:
     sb3_name: str = ""  # file name of the fresh .sb3 ("" = <model>.sb3)
     # TurboWarp's "fencing" (every move of a sprite is tested against the stage's edges) in the
     # fresh .sb3: false stores TurboWarp's settings comment on the stage turning it off, so the
-    # pen renderer's moves skip the test (lit BSP teapot, TurboWarp compiled: about 0.7 ms of a
-    # 6 ms frame). TurboWarp applies it to the whole project; Scratch ignores it. Never written
+    # pen renderer's moves skip the test (benchmarks/bench_player.py measures what it buys: the
+    # "fencing on" table in README). TurboWarp applies it to the whole project; Scratch ignores it. Never written
     # into export.into projects or the .sprite3.
     turbowarp_fencing: bool = False
     # Bake into an existing project: a new .sb3 with our lists put into `into_target` (replacing

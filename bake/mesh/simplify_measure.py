@@ -21,6 +21,11 @@ So, ``rounds`` times, the ``seeds`` largest distances at least a cell apart are 
 cell that has one of them as a corner is cut into four (edge midpoints, again shared exactly
 between neighbours), and the new points are measured. Each round halves the spacing where the
 distance peaks, so after 8 rounds the worst places are sampled 256 times finer than the rest.
+On the simplified side the cells around the places closest to the original's farthest points
+(within ``PIT_SHARE`` of the original -> simplified maximum) are cut in every round too: over a
+narrow pit of the original the simplified side's distance peaks above the pit, often between
+grid points whose distances are lower than elsewhere, where the largest-distance seeds never go
+(the shuffled bunny at 10%: 3% low without it, against the independent measurement).
 
 A cell is cut only if it may hold a distance above ``KEEP_SHARE`` (80%) of the largest distance
 made exact so far. The bound is proven: the distance to one triangle is convex, so over a cell
@@ -53,6 +58,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .simplify_error import SurfaceIndex, _pair_dist2, _verify
 
@@ -74,6 +80,10 @@ MIN_LEVEL_SIMPLIFIED = 1
 POINTS_PER_SIMPLIFIED = 12
 # separate places where the distance peaks, kept for the stage's repairs
 PEAKS = 64
+# the original's points within this share of the a -> b maximum mark places where the simplified
+# side's distance may peak (hausdorff: extra refinement there)
+PIT_SHARE = 0.9
+PIT_PLACES = 16  # at most this many such places (the largest, a grid cell apart)
 # cells are cut only where they may hold a distance above this share of the largest measured so
 # far (a proven bound, see directed()): the maximum is unchanged, and so is every distance the
 # stage's repairs and peak rounds look at (within 80% of the maximum)
@@ -276,14 +286,19 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
-             verify: bool = True, straddling: bool = False, prune: bool = True) -> Directed:
+             verify: bool = True, straddling: bool = False, prune: bool = True,
+             extra: tuple[np.ndarray, np.ndarray] | None = None) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring. With ``straddling``, every cell whose corners are closest to different
     triangles of Y is cut once before the refinement (the distance to one triangle is convex
     over a cell, largest at a corner; only where the closest triangle changes can it peak
     inside). With ``prune``, cells are cut only where they may hold a distance above
     KEEP_SHARE of the largest distance made exact so far (the stage's local repairs, which
-    compare small patches triangle by triangle, cut every cell around their seeds)."""
+    compare small patches triangle by triangle, cut every cell around their seeds).
+
+    ``extra``: (points on X, their triangles of X) where a peak is suspected; in every round the
+    cells around them are cut too, whatever their distances (:func:`hausdorff` passes the
+    places on the simplified surface closest to the original's farthest points)."""
     P = grid.P
     if len(P) == 0 or len(index_y.F) == 0:
         inf = 0.0 if len(P) == 0 else float("inf")
@@ -383,6 +398,12 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         top = pool[_distinct_top(allP[pool], allD[pool], max(seeds >> (r // 2), min(seeds, 32)), apart)]
         hot = np.zeros(len(allP), bool)
         hot[top] = True
+        if extra is not None and len(extra[0]):
+            # the points of the extra places' triangles nearest to each place: their cells are cut
+            ids = np.flatnonzero(np.isin(st["T"], extra[1]))
+            if len(ids):
+                _, nn = cKDTree(allP[ids]).query(extra[0], k=min(3, len(ids)))
+                hot[ids[np.asarray(nn).ravel()]] = True
         sel = can_rise(np.flatnonzero(hot[st["cells"]].any(axis=1)))
         if len(sel) == 0:
             break
@@ -404,6 +425,21 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
                     top_points=allP[tops], top_dists=D[tops], top_tris=allT[tops], nearest=near[:len(P)],
                     spacing=grid.spacing, peak_points=allP[pk], peak_dists=D[pk], peak_tris=allT[pk],
                     tri_max=tri_max, all_points=allP, all_dists=D, all_tris=allT, all_nearest=allN)
+
+
+def _pit_places(ab: Directed, index_b: SurfaceIndex) -> tuple[np.ndarray, np.ndarray] | None:
+    """The places on B closest to A's farthest points: A's measured points within
+    PIT_SHARE of the a -> b maximum (at most PIT_PLACES, a grid cell apart), and their closest
+    points and triangles on B."""
+    if ab.all_points is None or not np.isfinite(ab.max) or ab.max <= 0:
+        return None
+    sel = np.flatnonzero(ab.all_dists >= PIT_SHARE * ab.max)
+    if len(sel) == 0:
+        return None
+    sel = sel[_distinct_top(ab.all_points[sel], ab.all_dists[sel], PIT_PLACES, ab.spacing)]
+    _, tri, cp = index_b.query(ab.all_points[sel])
+    ok = tri >= 0
+    return cp[ok], tri[ok]
 
 
 @dataclass
@@ -454,7 +490,11 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=straddling)
     # (the simplified side's cells are cut around its seeds only, as before: its bound, to one
     # small triangle of the original, is too loose to leave many out, and costs a tenth)
-    ba = directed(ia, gb, seeds=seeds, rounds=rounds, prune=False)
+    # a peak of the simplified side over a narrow pit of the original can sit between grid points
+    # on a triangle whose grid shows only part of it (bunny shuffled, 10%: 3% low without this):
+    # it lies above the pit, where the original's farthest points are closest to the simplified
+    # surface, so the refinement also cuts around those places
+    ba = directed(ia, gb, seeds=seeds, rounds=rounds, prune=False, extra=_pit_places(ab, ib))
     worst = ab.worst if ab.max >= ba.max else ba.worst
     return HausdorffResult(max=max(ab.max, ba.max), mean=0.5 * (ab.mean + ba.mean), max_a_to_b=ab.max,
                            max_b_to_a=ba.max, mean_a_to_b=ab.mean, mean_b_to_a=ba.mean, worst_point=worst,

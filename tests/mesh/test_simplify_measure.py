@@ -162,3 +162,46 @@ def test_peak_round_puts_a_cut_off_feature_back():
     assert ref.max / sc.scale() < 0.007, ref.max / sc.scale()
     assert rec.details["peak_rounds"][0]["kept"] is True
     assert rec.accuracy["hausdorff_max"] == pytest.approx(ref.max / sc.scale(), rel=0.02)
+
+
+
+def _pitted_waves(k: int = 60, depth: float = 0.3, cell: tuple[int, int] = (40, 40)):
+    """The square [-1, 1]^2 as a k x k grid of cells (two triangles each), dented by broad waves
+    0.012 deep (z = -0.012 sin^2(3 pi x) sin^2(3 pi y): zero along x, y = +-1/3, ...) and one cell,
+    beside such a zero line, replaced by a square pyramid pit ``depth`` deep (four triangles from
+    the cell's edges down to its tip)."""
+    g = np.linspace(-1.0, 1.0, k + 1)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    Z = -0.012 * np.sin(3 * np.pi * X) ** 2 * np.sin(3 * np.pi * Y) ** 2
+    V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1)
+    idx = np.arange((k + 1) ** 2).reshape(k + 1, k + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    pit = cell[0] * k + cell[1]
+    keep = np.arange(k * k) != pit
+    F = np.concatenate([np.stack([a, b, c], 1)[keep], np.stack([a, c, d], 1)[keep]])
+    ring = [a[pit], b[pit], c[pit], d[pit]]
+    centre = V[ring].mean(axis=0)
+    tip = len(V)
+    V = np.vstack([V, centre - [0.0, 0.0, depth]])
+    F = np.vstack([F, [[ring[i], ring[(i + 1) % 4], tip] for i in range(4)]])
+    return V, F, centre
+
+
+def test_peak_over_a_narrow_pit_between_the_simplified_sides_grid_points_is_found():
+    """The original: a square with broad shallow waves and one narrow, deep pit; the simplified
+    surface: the flat square as two triangles, its grid far coarser than the pit. Its farthest point
+    from the original is above the pit's centre (the distance there computed by the independent
+    reference), between grid points whose distances are lower than the waves': refinement that
+    follows the largest grid distances (8 places here) goes to the waves and misses it. The measure
+    also refines where the original's farthest points (the pit's tip) are closest to the simplified
+    surface, and must find it within 2%."""
+    Va, Fa, centre = _pitted_waves()
+    Vb = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    Fb = np.array([[0, 1, 2], [0, 2, 3]])
+    top = np.array([centre[0], centre[1], 0.0])
+    want = float(point_triangle_distance(top, Va[Fa]).min())  # the independent reference's
+    assert want > 0.015  # nearly half the pit's width (1/30): its walls are steep; the waves give 0.012
+    h = hausdorff(Va, Fa, Vb, Fb, points=2000, seeds=8)
+    assert h.b_to_a.spacing > 2 / 30  # the grid is coarser than the pit
+    assert 0.98 * want <= h.max_b_to_a <= want * (1 + 1e-9)
+    assert h.max_a_to_b == pytest.approx(0.3, abs=1e-3)  # the pit's tip

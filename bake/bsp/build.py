@@ -475,19 +475,23 @@ class _Builder:
             return has_b, has_f, span, cost
         return [x.sum(axis=axis, dtype=np.int64) for x in (has_b, has_f, span, cost)]
 
-    def _count_block(self, Pc, deg, cnt, f, pl):
-        """Counts of the candidates ``pl`` (4, C) of one node against its fragments ``f``."""
+    def _extremes(self, Pc, f, fc, planes, shape, per_pair):
+        """Per (fragment, candidate) pair of ``shape``: the least and largest signed distance of
+        the fragment's corners to the plane, and how many corners lie on it (within epsilon).
+        ``planes`` (a, b, c, w): one per pair (``per_pair``, flat lists: ``shape`` (n,)) or one
+        per column (a block of fragments ``f`` x candidates). Corners 0-2 of every fragment,
+        further corners only where a fragment has them (the padding repeats corner 0 and would
+        change nothing). Both layouts do the same float32 operations in the same order."""
         eps = np.float32(self.opt.epsilon)
-        a, b, c, w = (pl[i][None, :] for i in range(4))
-        shape = (len(f), pl.shape[1])
+        a, b, c, w = planes
+        col = (lambda q: q) if per_pair else (lambda q: q[..., None])  # corners down the rows
         d, tmp = np.empty(shape, np.float32), np.empty(shape, np.float32)
         mn, mx = np.empty(shape, np.float32), np.empty(shape, np.float32)
         on_c = np.zeros(shape, np.int8)
         onb = np.empty(shape, bool)
-        fc = cnt[f]
         for k in range(Pc.shape[1]):
-            if k < 3:
-                q = Pc[:, k, f][..., None]  # (3, F, 1)
+            if k < 3:  # in place: d = a*x + b*y + c*z - w
+                q = col(Pc[:, k, f])  # one gather of the corner's coordinates
                 np.multiply(a, q[0], out=d)
                 np.multiply(b, q[1], out=tmp)
                 d += tmp
@@ -507,21 +511,26 @@ class _Builder:
                 sel = np.flatnonzero(fc > k)
                 if len(sel) == 0:
                     break
-                q = Pc[:, k, f[sel]][..., None]
-                ds = a * q[0] + b * q[1] + c * q[2] - w
+                q = col(Pc[:, k, f[sel]])
+                sa, sb, sc, sw = (x[sel] for x in planes) if per_pair else planes
+                ds = sa * q[0] + sb * q[1] + sc * q[2] - sw
                 mn[sel] = np.minimum(mn[sel], ds)
                 mx[sel] = np.maximum(mx[sel], ds)
                 on_c[sel] += np.abs(ds) <= eps
+        return mn, mx, on_c
+
+    def _count_block(self, Pc, deg, cnt, f, pl):
+        """Counts of the candidates ``pl`` (4, C) of one node against its fragments ``f``."""
+        a, b, c, w = (pl[i][None, :] for i in range(4))
+        mn, mx, on_c = self._extremes(Pc, f, cnt[f], (a, b, c, w), (len(f), pl.shape[1]), per_pair=False)
         return np.array(self._classify(mn, mx, on_c, deg[f][:, None], axis=0), np.float64)
 
     def _count_flat(self, Pc, deg, cnt, c_node, comp, fpos, foff, ln):
         """Counts of candidates (planes ``comp`` (4, n), nodes ``c_node``) against their nodes'
         fragments, as flat lists of (fragment, candidate) pairs in chunks of about 1.5M pairs."""
-        eps = np.float32(self.opt.epsilon)
         n_c = len(c_node)
         out = np.zeros((4, n_c))
         cum = np.cumsum(ln)
-        K = Pc.shape[1]
         budget = 1_500_000
         i0 = 0
         while i0 < n_c:
@@ -532,41 +541,7 @@ class _Builder:
             within = np.arange(int(lc.sum())) - seg[rep]
             f = fpos[foff[cn][rep] + within]
             a, b, c, w = (comp[i, i0:i1][rep] for i in range(4))
-            fc = cnt[f]
-            # corners 0-2 of every fragment, further corners only where a fragment has them (the
-            # padding repeats corner 0 and would change nothing)
-            nn = len(f)
-            d, tmp = np.empty(nn, np.float32), np.empty(nn, np.float32)
-            mn, mx = np.empty(nn, np.float32), np.empty(nn, np.float32)
-            on_c = np.zeros(nn, np.int8)
-            onb = np.empty(nn, bool)
-            for k in range(K):
-                sel = None if k < 3 else np.flatnonzero(fc > k)
-                if sel is not None and len(sel) == 0:
-                    break
-                ff = f if sel is None else f[sel]
-                q = Pc[:, k, ff]  # (3, n) one gather of the corner's coordinates
-                if sel is None:  # in place: d = a*x + b*y + c*z - w
-                    np.multiply(a, q[0], out=d)
-                    np.multiply(b, q[1], out=tmp)
-                    d += tmp
-                    np.multiply(c, q[2], out=tmp)
-                    d += tmp
-                    d -= w
-                    np.abs(d, out=tmp)
-                    np.less_equal(tmp, eps, out=onb)
-                    if k == 0:
-                        mn[:] = d
-                        mx[:] = d
-                    else:
-                        np.minimum(mn, d, out=mn)
-                        np.maximum(mx, d, out=mx)
-                    on_c += onb
-                else:
-                    ds = a[sel] * q[0] + b[sel] * q[1] + c[sel] * q[2] - w[sel]
-                    mn[sel] = np.minimum(mn[sel], ds)
-                    mx[sel] = np.maximum(mx[sel], ds)
-                    on_c[sel] += np.abs(ds) <= eps
+            mn, mx, on_c = self._extremes(Pc, f, cnt[f], (a, b, c, w), (len(f),), per_pair=True)
             for r, x in enumerate(self._classify(mn, mx, on_c, deg[f])):
                 out[r, i0:i1] = np.add.reduceat(x, seg, dtype=np.int64)
             i0 = i1

@@ -333,6 +333,9 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
         rec.effects.append({"name": "lightmap", "ran": False, "reason": str(e),
                             "seconds": round(time.perf_counter() - t0, 6)})
         return scene
+    if atlas.retried_after:
+        rec.warn(f"lightmap: xatlas crashed ({atlas.retried_after}) once on this mesh; a second run "
+                 "succeeded and its atlas is used")
     _atlas_warnings(atlas, cfg, rec)
     # before any texel work (the covering below, the lighting stage's bake): will it fit in memory?
     mem = lightmap.check_memory(atlas, lm, lit=lm.lit)
@@ -342,7 +345,7 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
     figs.update(mem)
     figs.update({"xatlas_seconds": round(atlas.seconds, 6), "cached": atlas.cached, "key": atlas.key[:16],
                  "xatlas_version": atlas.xatlas_version, "texels_per_unit": atlas.texels_per_unit,
-                 "xatlas_scale": atlas.xatlas_scale})
+                 "xatlas_scale": atlas.xatlas_scale, "xatlas_retried_after": atlas.retried_after})
     if figs["triangles_unmapped"]:
         rec.warn(f"lightmap: xatlas left {figs['triangles_unmapped']} degenerate triangle(s) without UVs "
                  "(they get the texel at UV 0, 0)")

@@ -278,6 +278,30 @@ def test_real_xatlas_segfault_is_reported(tmp_path):
     assert time.perf_counter() - t < 60
 
 
+def test_a_crash_once_is_run_again_and_a_crash_twice_is_reported(tmp_path, monkeypatch):
+    """A worker killed by a signal on its first run is started once more; the second run's atlas
+    is the one a clean run gives (the same UVs), and the retry is named. Two crashes: an error."""
+    m = trimesh.creation.box(extents=(2, 1, 1))
+    scene = make_scene(m.vertices, m.faces)
+    clean = lm.unwrap(scene, _cfg(tmp_path), cache_dir=None)
+    assert clean.retried_after == ""
+    marker = tmp_path / "crashed-once"
+    script = ("import os, runpy, signal, sys\n"
+              f"m = {str(marker)!r}\n"
+              "if not os.path.exists(m):\n"
+              "    open(m, 'w').close(); os.kill(os.getpid(), signal.SIGSEGV)\n"
+              f"sys.argv = [{str(lm.WORKER)!r}] + sys.argv[1:]\n"
+              f"runpy.run_path({str(lm.WORKER)!r}, run_name='__main__')\n")
+    monkeypatch.setattr(lm, "WORKER_COMMAND", [sys.executable, "-c", script])
+    again = lm.unwrap(scene, _cfg(tmp_path), cache_dir=None)
+    assert marker.exists() and again.retried_after == "SIGSEGV"
+    assert np.array_equal(again.tri_uvs, clean.tri_uvs)
+    monkeypatch.setattr(lm, "WORKER_COMMAND", [sys.executable, "-c",
+                                               "import os, signal; os.kill(os.getpid(), signal.SIGABRT)"])
+    with pytest.raises(StageError, match=r"crashed \(SIGABRT\) on this mesh \(12 triangles\), twice"):
+        lm.unwrap(scene, _cfg(tmp_path), cache_dir=None)
+
+
 def test_hanging_worker_is_stopped(tmp_path, monkeypatch):
     monkeypatch.setattr(lm, "WORKER_COMMAND", [sys.executable, "-c", "import time; time.sleep(60)"])
     m = trimesh.creation.box()

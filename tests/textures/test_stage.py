@@ -279,6 +279,7 @@ def test_stage_lightmap_outputs_and_crash(tmp_path, monkeypatch):
     cfg = TexturesConfig(enabled=True)
     cfg.lightmap = dataclasses.replace(cfg.lightmap, enabled=True, resolution=64, cache_dir=str(tmp_path))
     out, rec = tstage.stage(scene, cfg)
+    assert out.tri_lightmap_uvs is not None, rec.warnings
     assert out.tri_lightmap_uvs.shape == (scene.n_triangles, 3, 2)
     exported, _ = export_stage(out, ExportConfig(sb3=False, sprite3=False))
     uv = exported.lists["lightmap uvs"]

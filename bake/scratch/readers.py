@@ -63,9 +63,12 @@ numbers) is in front of ``near`` and its picture within those 4000 pixels; only 
 tests each vertex (the list ``_bad``). The filler draws the outline (pen size 2: everything
 within half a pixel of an edge is covered fully) and a fan of lines from the first corner, ``n - 1``
 of them with ``n = ceiling(L - L^2 / (2 * area2))`` for the opposite edge's length ``L``, which
-leaves no point farther than half a pixel from a line. The BSP stage puts each triangle's corner
-opposite its shortest edge first (``bake.bsp.stage.apex_first``), so ``L`` is short and the fan
-has few lines.
+leaves no point farther than half a pixel from a line; the fan zigzags (a, p1, p2, a, p3, p4, a,
+...) and ends at its last point. A *needle*, ``L`` at most one pixel, is one line from the first
+corner to the middle of the opposite edge instead: every point of it is within ``L / 2`` of that
+line. The BSP stage puts each triangle's corner opposite its shortest edge first
+(``bake.bsp.stage.apex_first``), so ``L`` is short, the fan has few lines and thin triangles are
+needles.
 
 What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
 ``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.
@@ -435,20 +438,28 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     dx, dy, l2, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_l2", "_n", "_x", "_y"))
     fill = [
         colour,
-        B.goto_xy(ax, ay), B.pen_down(), B.goto_xy(bx, by), B.goto_xy(cx, cy), B.goto_xy(ax, ay),
-        # n <= 1 whenever 2 * area <= 2 (the largest L - L^2 / (2 * area2) is area2 / 2)
-        B.if_(lt(a2, -2), [
-            r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
-            r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
-            r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
-            B.if_(gt(n, 1), [
-                # zigzag: a -> p1 -> p2 -> a -> p3 -> p4 -> a ... (p2k-1 -> p2k runs along b-c);
-                # repeat rounds (n - 1) / 2 up, so with n - 1 odd the last point is p_n = c
-                r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
-                B.repeat(div(sub(n, 1), 2), [
-                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
-                    r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+        B.goto_xy(ax, ay), B.pen_down(),
+        r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)), r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
+        B.if_(gt(l2, 1), [
+            B.goto_xy(bx, by), B.goto_xy(cx, cy), B.goto_xy(ax, ay),
+            # n <= 1 whenever 2 * area <= 2 (the largest L - L^2 / (2 * area2) is area2 / 2)
+            B.if_(lt(a2, -2), [
+                r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
+                B.if_(gt(n, 1), [
+                    # zigzag: a -> p1 -> p2 -> a -> p3 -> p4 -> a ... (p2k-1 -> p2k runs along
+                    # b-c): floor((n - 1) / 2) rounds (repeat rounds (n - 2) / 2 half up), then
+                    # with n - 1 odd the one point left, p(n-1), from a (the outline drew c -> a)
+                    r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
+                    B.repeat(div(sub(n, 2), 2), [
+                        r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+                        r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+                    B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
+                ]),
             ]),
+        ], [
+            # a needle (b-c at most a pixel long): one line from a to the middle of b-c passes
+            # within half a pixel of every point of the triangle
+            B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))),
         ]),
         B.pen_up(),
     ]

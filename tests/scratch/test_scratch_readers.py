@@ -15,6 +15,7 @@ scratch-vm, and the reader's custom blocks are run headless. They must give:
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -225,3 +226,96 @@ def test_demo_script_and_reader_without_bvh(baked):
     assert {"render", "project vertices", "bvh ray %s %s %s %s %s %s"} <= names
     assert not names & {"decode textimage %s", "load triangle %s"}
     assert json.dumps(project["extensions"]) == '["pen"]'
+
+
+def _filler_triangles(rng) -> np.ndarray:
+    """(T, 3, 2) stage-pixel triangles, clockwise on the stage (drawn), first corner opposite the
+    shortest edge (as the BSP stage writes them): needles (that edge 0.05-1 pixel, and just over
+    one pixel), small ones without a fan, and fans of every length 2-12 of both parities."""
+    tris = []
+    shorts = list(np.linspace(0.05, 1.0, 12)) + [1.0 + 1e-9, 1.01, 1.3]
+    shorts += list(rng.uniform(1.5, 12.0, 40)) + [2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    for k, L in enumerate(shorts):
+        h = float(rng.uniform(max(L, 1.5), 40.0)) if k % 5 else float(rng.uniform(L, L + 2.0))
+        ang = float(rng.uniform(0, 2 * np.pi))
+        u, w = np.array([np.cos(ang), np.sin(ang)]), np.array([-np.sin(ang), np.cos(ang)])
+        off = float(rng.uniform(-0.3, 0.3)) * L  # where a's foot falls along b-c
+        col, row = k % 8, k // 8
+        centre = np.array([-200.0 + 55.0 * col, -150.0 + 50.0 * row])
+        b = centre - 0.5 * L * u
+        c = centre + 0.5 * L * u
+        a = centre + off * u + h * w
+        t = np.array([a, b, c])
+        area2 = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if area2 > 0:
+            t = np.array([a, c, b])
+        tris.append(t)
+    return np.array(tris)
+
+
+def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(vm, tmp_path):  # noqa: F811
+    """Each triangle the renderer fills: every point of it lies within half a pixel of one of its
+    pen lines (pen size 2: everything within half a pixel of the triangle is painted), no line
+    leaves it, and it costs the lines the filler's rule says: one for a needle (opposite edge at
+    most a pixel long), else the outline and a fan of n - 1 lines zigzagged, 3 + floor(1.5 (n - 1))
+    (the lines counted from the strokes scratch-vm's pen made)."""
+    cam = readers.Camera()  # at (0, 0, -5) looking along +z, focal 300: a point (x, y, 0) is at 60 (x, y)
+    tri_px = _filler_triangles(np.random.default_rng(11))
+    T = len(tri_px)
+    verts = np.concatenate([tri_px / 60.0, np.zeros((T, 3, 1))], axis=2).reshape(-1, 3)
+    lists = {"verts": [float(x) for x in verts.ravel()],
+             "tris": [int(x) for t in range(T) for x in (3 * t + 1, 3 * t + 2, 3 * t + 3, 1)],
+             "tri colors": [int(c) for c in np.random.default_rng(5).choice(1 << 24, T, replace=False)]}
+    spec = readers.ReaderSpec(mesh=readers.MeshNames(mat_colors=None, tri_colors="tri colors"), bvh=None, textimage=False,
+                              bounds=readers.bounding_sphere(lists["verts"]))
+    sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
+    data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
+    path = tmp_path / "filler.sb3"
+    path.write_bytes(data)
+    run = vm({"load": str(path), "runs": [call("Mesh", "render", pen=True, set=camera_vars(cam))]})["runs"][0]
+    assert run["done"]
+    px, py, _ = readers.project(verts, cam)
+    P = np.stack([px, py], axis=1).reshape(T, 3, 2)
+    assert np.abs(P - tri_px).max() < 1e-9  # the design is what the stage shows
+    assert readers.drawn(verts, lists["tris"], cam).all()
+    # one group of strokes per triangle, each opened by pen down's dot at its first corner
+    strokes = np.array(run["pen"], np.float64)
+    assert (strokes[:, 4] == 2).all()
+    dot = (strokes[:, 0] == strokes[:, 2]) & (strokes[:, 1] == strokes[:, 3])
+    starts = np.flatnonzero(dot)
+    assert len(starts) == T
+    groups = np.split(strokes, starts[1:])
+    w = np.linspace(0, 1, 41)
+    bary = np.array([(x, y, 1 - x - y) for x in w for y in w if x + y <= 1 + 1e-12])
+    bary = np.clip(bary, 0, 1)
+    lines_needed = 0
+    for t, g in enumerate(groups):
+        A, B, C = P[t]
+        assert np.array_equal(g[0, :2], A), t
+        seg = g[1:, :4]
+        # cost: the rule, counted independently of the blocks
+        L2 = float(((C - B) ** 2).sum())
+        area2 = float((B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0]))
+        if L2 <= 1:
+            want = 1
+        else:
+            n = math.ceil(math.sqrt(L2) - L2 / (-2 * area2)) if area2 < -2 else 1
+            want = 3 + (3 * (n - 1)) // 2 if n > 1 else 3
+        assert len(seg) == want, (t, len(seg), want)
+        lines_needed += want
+        # no line leaves the triangle (to 1e-9 of a pixel)
+        ends = seg.reshape(-1, 2)
+        e0, e1 = B - A, C - A
+        det = e0[0] * e1[1] - e0[1] * e1[0]
+        s = ((ends[:, 0] - A[0]) * e1[1] - (ends[:, 1] - A[1]) * e1[0]) / det
+        r = (e0[0] * (ends[:, 1] - A[1]) - e0[1] * (ends[:, 0] - A[0])) / det
+        scale = max(1.0, float(np.abs(P[t]).max()))
+        assert (s >= -1e-9 * scale).all() and (r >= -1e-9 * scale).all() and (s + r <= 1 + 1e-9 * scale).all(), t
+        # every point of the triangle within half a pixel of a line
+        Q = bary @ P[t]
+        p0, d = seg[:, None, :2], seg[:, None, 2:] - seg[:, None, :2]
+        dd = (d * d).sum(-1)
+        along = np.clip(((Q[None] - p0) * d).sum(-1) / np.where(dd > 0, dd, 1), 0, 1)
+        dist = np.sqrt((((p0 + along[..., None] * d) - Q[None]) ** 2).sum(-1)).min(axis=0)
+        assert dist.max() <= 0.5 + 1e-9, (t, float(dist.max()), float(math.sqrt(L2)))
+    assert lines_needed == len(strokes) - T

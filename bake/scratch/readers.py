@@ -60,15 +60,15 @@ stage centre in x and y (the sprite wears a transparent 8192 x 8192 costume, so 
 fencing, which keeps a costume's bounds on the stage, never moves the pen there; lines beyond
 the stage are simply not seen). A frame is *safe* when the model's bounding sphere (baked in as
 numbers) is in front of ``near`` and its picture within those 4000 pixels; only an unsafe frame
-tests each vertex (the list ``_bad``). The filler draws the outline (pen size 2: everything
-within half a pixel of an edge is covered fully) and a fan of lines from the first corner, ``n - 1``
-of them with ``n = ceiling(L - L^2 / (2 * area2))`` for the opposite edge's length ``L``, which
-leaves no point farther than half a pixel from a line; the fan zigzags (a, p1, p2, a, p3, p4, a,
-...) and ends at its last point. A *needle*, ``L`` at most one pixel, is one line from the first
-corner to the middle of the opposite edge instead: every point of it is within ``L / 2`` of that
-line. The BSP stage puts each triangle's corner opposite its shortest edge first
-(``bake.bsp.stage.apex_first``), so ``L`` is short, the fan has few lines and thin triangles are
-needles.
+tests each vertex (the list ``_bad``). The filler draws a fan of ``k = ceiling(L)`` lines from the
+first corner ``a`` to the middles ``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c``
+(``L`` its length), walked ``q1, a, q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines.
+No point of the triangle is farther than half a pixel from a line (a point on the way from ``a``
+to a point ``x`` of ``b-c``, a fraction ``s`` along, is within ``s |x - q|`` of the line to the
+nearest ``q``, and ``|x - q| <= L / 2k <= 1/2``), so with pen size 2 everything within half a
+pixel of the triangle is painted and no line leaves it: no outline is needed. The BSP stage puts
+each triangle's corner opposite its shortest edge first (``bake.bsp.stage.apex_first``), so ``L``
+is short and the fan has few lines (one for a needle, ``L <= 1``).
 
 What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
 ``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.
@@ -434,32 +434,26 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     unusable = gt(add(add(item(var("_i1"), bad), item(var("_i2"), bad)), item(var("_i3"), bad)), 0)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
     colour = B.set_pen_color(_colour(r, add(div(b, 4), 1), b))
-    # the outline, then a fan from a to n - 1 points along b-c
-    dx, dy, l2, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_l2", "_n", "_x", "_y"))
+    # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
+    # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
+    dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
     fill = [
         colour,
-        B.goto_xy(ax, ay), B.pen_down(),
-        r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)), r.set("_l2", add(mul(dx, dx), mul(dy, dy))),
-        B.if_(gt(l2, 1), [
-            B.goto_xy(bx, by), B.goto_xy(cx, cy), B.goto_xy(ax, ay),
-            # n <= 1 whenever 2 * area <= 2 (the largest L - L^2 / (2 * area2) is area2 / 2)
-            B.if_(lt(a2, -2), [
-                r.set("_n", B.mathop("ceiling", sub(B.sqrt(l2), div(l2, mul(a2, -2))))),
-                B.if_(gt(n, 1), [
-                    # zigzag: a -> p1 -> p2 -> a -> p3 -> p4 -> a ... (p2k-1 -> p2k runs along
-                    # b-c): floor((n - 1) / 2) rounds (repeat rounds (n - 2) / 2 half up), then
-                    # with n - 1 odd the one point left, p(n-1), from a (the outline drew c -> a)
-                    r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)), r.set("_x", bx), r.set("_y", by),
-                    B.repeat(div(sub(n, 2), 2), [
-                        r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
-                        r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
-                    B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
-                ]),
-            ]),
+        r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
+        r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
+        B.if_(gt(n, 1), [
+            r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
+            r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
+            B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),
+            # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd
+            # the last point, from a
+            B.repeat(div(sub(n, 2), 2), [
+                r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+                r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+            B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
         ], [
-            # a needle (b-c at most a pixel long): one line from a to the middle of b-c passes
-            # within half a pixel of every point of the triangle
-            B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))),
+            # k = 1, a needle: the one line from the middle of b-c to a
+            B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))), B.pen_down(), B.goto_xy(ax, ay),
         ]),
         B.pen_up(),
     ]

@@ -256,8 +256,8 @@ def _filler_triangles(rng) -> np.ndarray:
 def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(vm, tmp_path):  # noqa: F811
     """Each triangle the renderer fills: every point of it lies within half a pixel of one of its
     pen lines (pen size 2: everything within half a pixel of the triangle is painted), no line
-    leaves it, and it costs the lines the filler's rule says: one for a needle (opposite edge at
-    most a pixel long), else the outline and a fan of n - 1 lines zigzagged, 3 + floor(1.5 (n - 1))
+    leaves it, and it costs the lines the filler's rule says: a fan of k = ceiling(L) lines to the
+    opposite edge (length L), walked in floor((3k - 1) / 2) lines, one for a needle (L <= 1)
     (the lines counted from the strokes scratch-vm's pen made)."""
     cam = readers.Camera()  # at (0, 0, -5) looking along +z, focal 300: a point (x, y, 0) is at 60 (x, y)
     tri_px = _filler_triangles(np.random.default_rng(11))
@@ -291,17 +291,14 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
     lines_needed = 0
     for t, g in enumerate(groups):
         A, B, C = P[t]
-        assert np.array_equal(g[0, :2], A), t
         seg = g[1:, :4]
-        # cost: the rule, counted independently of the blocks
-        L2 = float(((C - B) ** 2).sum())
-        area2 = float((B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0]))
-        if L2 <= 1:
-            want = 1
-        else:
-            n = math.ceil(math.sqrt(L2) - L2 / (-2 * area2)) if area2 < -2 else 1
-            want = 3 + (3 * (n - 1)) // 2 if n > 1 else 3
+        # cost: the rule, counted independently of the blocks; the pen goes down at the first
+        # point of the fan, in the middle of the first of the k pieces of b-c
+        k = max(1, math.ceil(math.sqrt(float(((C - B) ** 2).sum()))))
+        assert np.abs(g[0, :2] - (B + (C - B) / (2 * k))).max() < 1e-9, t
+        want = (3 * k - 1) // 2
         assert len(seg) == want, (t, len(seg), want)
+        L2 = float(((C - B) ** 2).sum())
         lines_needed += want
         # no line leaves the triangle (to 1e-9 of a pixel)
         ends = seg.reshape(-1, 2)

@@ -342,17 +342,18 @@ def _load_triangle(r: ReaderBuilder) -> None:
         ik = r.v(f"_i{k}")
         for a, axis in enumerate("xyz"):
             body.append(r.set(f"{axis}{k}", item(add(ik, a + 1), m.verts)))
-    body.append(r.set("tri color", _colour(r, t, base)))
+    body.append(r.set("tri color", _colour(r, t, item(add(base, 4), m.tris))))
     r.define("load triangle %s", ["t"], body)
 
 
-def _colour(r: ReaderBuilder, t, base) -> Any:
-    """The colour number of triangle t (tris items from ``base`` + 1): its own, its material's."""
+def _colour(r: ReaderBuilder, t, material) -> Any:
+    """The colour number of triangle t (``material``: the reporter of its material item in
+    ``tris``): its own, its material's."""
     m = r.spec.mesh
     if m.tri_colors:
         return item(t, r.lst(m.tri_colors))
     if m.mat_colors:
-        return item(item(add(base, 4), m.tris), r.lst(m.mat_colors))
+        return item(material, r.lst(m.mat_colors))
     return "#808080"
 
 
@@ -389,7 +390,8 @@ def _camera_blocks(r: ReaderBuilder) -> None:
         B.delete_all(bad),
         B.if_(eq(var("_safe"), 0), [
             r.set("_i", 1),
-            B.repeat(nverts, [B.if_(usable(i), [B.add_to(bad, 0)], [B.add_to(bad, 1)]), r.change("_i", 1)]),
+            # "true" (1 to the filler's sum) where unusable; a boolean is kept as it is in a list
+            B.repeat(nverts, [B.add_to(bad, not_(usable(i))), r.change("_i", 1)]),
         ]),
     ]
     r.define("project vertices", [], [
@@ -416,7 +418,7 @@ def _camera_blocks(r: ReaderBuilder) -> None:
 
 # ---- the frame
 def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
-    """Fill the triangle whose ``tris`` items follow item ``_b`` (see the module docstring)."""
+    """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring)."""
     m = r.spec.mesh
     px, py, bad = "_px", "_py", "_bad"
     b = r.v("_b")
@@ -425,15 +427,15 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     load: list[B.Node] = []
     for k, name in ((1, "a"), (2, "b"), (3, "c")):
         ik = r.v(f"_i{k}")
-        load += [r.set(f"_i{k}", item(add(b, k), m.tris)),
+        load += [r.set(f"_i{k}", item(b if k == 1 else add(b, k - 1), m.tris)),
                  r.set(f"_{name}x", item(ik, px)), r.set(f"_{name}y", item(ik, py))]
     load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
     if _two_sided(r.spec):
         two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
-        load.append(B.if_(eq(item(item(add(b, 4), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
+        load.append(B.if_(eq(item(item(add(b, 3), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
     unusable = gt(add(add(item(var("_i1"), bad), item(var("_i2"), bad)), item(var("_i3"), bad)), 0)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
-    colour = B.set_pen_color(_colour(r, add(div(b, 4), 1), b))
+    colour = B.set_pen_color(_colour(r, div(add(b, 3), 4), item(add(b, 3), m.tris)))
     # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
     # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
     dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
@@ -441,19 +443,16 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
         colour,
         r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
         r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
+        r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
+        r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
+        B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),  # k = 1 (a needle): that one line
         B.if_(gt(n, 1), [
-            r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
-            r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
-            B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),
             # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd
             # the last point, from a
             B.repeat(div(sub(n, 2), 2), [
                 r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
                 r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
             B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
-        ], [
-            # k = 1, a needle: the one line from the middle of b-c to a
-            B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))), B.pen_down(), B.goto_xy(ax, ay),
         ]),
         B.pen_up(),
     ]
@@ -474,13 +473,13 @@ def _render_blocks(r: ReaderBuilder) -> None:
             B.call("bsp walk"),
             r.set("_k", 1),
             B.repeat(div(B.list_length(ranges), 2), [
-                r.set("_b", sub(mul(item(k, ranges), 4), 4)),
+                r.set("_b", sub(mul(item(k, ranges), 4), 3)),
                 B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", 4)]),
                 r.change("_k", 2),
             ]),
         ]
     else:  # no tree: the list's order
-        frame = [r.set("_b", 0), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 4)])]
+        frame = [r.set("_b", 1), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 4)])]
     r.define("render", [], start + frame)
 
 

@@ -20,7 +20,7 @@ custom block                                what it does                        
 ``project vertices``                        every vertex into the lists ``_px    :func:`project`,
                                             _py _pz`` (screen x, y, depth over   :func:`safe_frame`
                                             focal);
-                                            ``_safe`` = 1 when the whole model is
+                                            ``_safe`` true when the whole model is
                                             in front of ``near`` and where the
                                             pen can draw
 ``bsp walk``                                painter's order (back to front) for  ``bake.bsp.traverse.
@@ -60,7 +60,9 @@ stage centre in x and y (the sprite wears a transparent 8192 x 8192 costume, so 
 fencing, which keeps a costume's bounds on the stage, never moves the pen there; lines beyond
 the stage are simply not seen). A frame is *safe* when the model's bounding sphere (baked in as
 numbers) is in front of ``near`` and its picture within those 4000 pixels; only an unsafe frame
-tests each vertex (the list ``_bad``). The filler draws a fan of ``k = ceiling(L)`` lines from the
+tests each vertex (an unusable one's screen x in ``_px`` becomes 1e9, and a triangle whose corners'
+``|x|`` sum to more than 3 x 4000 is not drawn). The pen's colour is set only when it changes
+(``_pc``: the last colour set this frame). The filler draws a fan of ``k = ceiling(L)`` lines from the
 first corner ``a`` to the middles ``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c``
 (``L`` its length), walked ``q1, a, q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines.
 No point of the triangle is farther than half a pixel from a line (a point on the way from ``a``
@@ -218,6 +220,7 @@ def project(verts: np.ndarray, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.
 #: stage ("fencing"), so the renderer wears a transparent 8192 x 8192 costume (FENCE_SVG), which
 #: lets it reach 4096 + 240 - 15 pixels right or left (and as far up or down) before fencing moves it
 SAFE_X = SAFE_Y = 4000
+UNUSABLE_X = 1e9  # an unusable vertex's screen x in an unsafe frame (far beyond 3 * SAFE_X)
 FENCE = 8192
 FENCE_SVG = (f'<svg xmlns="http://www.w3.org/2000/svg" width="{FENCE}" height="{FENCE}" '
              f'viewBox="0 0 {FENCE} {FENCE}"></svg>').encode()
@@ -364,7 +367,7 @@ def _camera_blocks(r: ReaderBuilder) -> None:
     for n, val in (("cam x", cam.x), ("cam y", cam.y), ("cam z", cam.z), ("cam yaw", cam.yaw),
                    ("cam pitch", cam.pitch), ("focal", cam.focal), ("near", cam.near)):
         r.v(n, val)
-    px, py, pz, bad = r.lst("_px"), r.lst("_py"), r.lst("_pz"), r.lst("_bad")
+    px, py, pz = r.lst("_px"), r.lst("_py"), r.lst("_pz")
     i = r.v("_i")
     dx, dy, dz, z1, z2 = (r.v(n) for n in ("_dx", "_dy", "_dz", "_z1", "_z2"))
     syw, cyw, spt, cpt = (r.v(n) for n in ("_syaw", "_cyaw", "_spitch", "_cpitch"))
@@ -376,22 +379,19 @@ def _camera_blocks(r: ReaderBuilder) -> None:
                     and_(lt(B.abs_(item(v, px)), SAFE_X), lt(B.abs_(item(v, py)), SAFE_Y)))
 
     # the safe-frame test: the model's bounding sphere (centre, radius: spec.bounds) is in front of
-    # near and its picture within SAFE_X of the centre; in an unsafe frame, which vertices are
-    # unusable (1) into _bad, read by the filler
+    # near and its picture within SAFE_X of the centre (_safe: true or false); in an unsafe frame
+    # an unusable vertex's screen x becomes UNUSABLE_X, which the filler tests
     (qx, qy, qz), rad = r.spec.bounds if r.spec.bounds is not None else ((0.0, 0.0, 0.0), BIG)
     depth = sub(z2, rad)  # the sphere's nearest depth
     safe = [
         r.set("_dx", sub(qx, var("cam x"))), r.set("_dy", sub(qy, var("cam y"))), r.set("_dz", sub(qz, var("cam z"))),
         r.set("_z2", add(mul(dy, spt), mul(add(mul(dx, syw), mul(dz, cyw)), cpt))),
-        r.set("_safe", 0),
         # |screen x| <= focal * (distance + radius) / (depth - radius), the same for y
-        B.if_(and_(gt(depth, near), lt(mul(var("focal"), add(B.sqrt(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz))), rad)),
-                                      mul(SAFE_X, depth))), [r.set("_safe", 1)]),
-        B.delete_all(bad),
+        r.set("_safe", and_(gt(depth, near), lt(mul(var("focal"), add(B.sqrt(add(add(mul(dx, dx), mul(dy, dy)), mul(dz, dz))), rad)),
+                                                 mul(SAFE_X, depth)))),
         B.if_(eq(var("_safe"), 0), [
             r.set("_i", 1),
-            # "true" (1 to the filler's sum) where unusable; a boolean is kept as it is in a list
-            B.repeat(nverts, [B.add_to(bad, not_(usable(i))), r.change("_i", 1)]),
+            B.repeat(nverts, [B.if_(not_(usable(i)), [B.replace_item(px, i, UNUSABLE_X)]), r.change("_i", 1)]),
         ]),
     ]
     r.define("project vertices", [], [
@@ -420,40 +420,45 @@ def _camera_blocks(r: ReaderBuilder) -> None:
 def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring)."""
     m = r.spec.mesh
-    px, py, bad = "_px", "_py", "_bad"
+    px, py = "_px", "_py"
     b = r.v("_b")
     ax, ay, bx, by, cx, cy = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
     a2 = r.v("_a")
+    # corner a's items are read at _b, b's at _b + 1, c's at _b + 2: _b steps along the record
+    # (one change instead of an add per corner and no index variables); it ends at c's item
     load: list[B.Node] = []
     for k, name in ((1, "a"), (2, "b"), (3, "c")):
-        ik = r.v(f"_i{k}")
-        load += [r.set(f"_i{k}", item(b if k == 1 else add(b, k - 1), m.tris)),
-                 r.set(f"_{name}x", item(ik, px)), r.set(f"_{name}y", item(ik, py))]
+        load += [r.set(f"_{name}x", item(item(b, m.tris), px)), r.set(f"_{name}y", item(item(b, m.tris), py))]
+        if k < 3:
+            load.append(r.change("_b", 1))
     load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
     if _two_sided(r.spec):
         two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
-        load.append(B.if_(eq(item(item(add(b, 3), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
-    unusable = gt(add(add(item(var("_i1"), bad), item(var("_i2"), bad)), item(var("_i3"), bad)), 0)
+        load.append(B.if_(eq(item(item(add(b, 1), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
+    # an unusable corner's x is UNUSABLE_X; usable ones are within SAFE_X of the centre, so the
+    # sum of |x| is below 3 * SAFE_X exactly when all three are usable
+    unusable = gt(add(add(B.abs_(ax), B.abs_(bx)), B.abs_(cx)), 3 * SAFE_X)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
-    colour = B.set_pen_color(_colour(r, div(add(b, 3), 4), item(add(b, 3), m.tris)))
+    # the pen's colour is set only when it changes (a colour set costs TurboWarp more than the test)
+    c, pc = r.v("_c"), r.v("_pc")
+    colour = [r.set("_c", _colour(r, div(add(b, 1), 4), item(add(b, 1), m.tris))),
+              B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
     # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
     # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
     dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
     fill = [
-        colour,
+        *colour,
         r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
         r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
         r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
         r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
         B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),  # k = 1 (a needle): that one line
-        B.if_(gt(n, 1), [
-            # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd
-            # the last point, from a
-            B.repeat(div(sub(n, 2), 2), [
-                r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
-                r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
-            B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
-        ]),
+        # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up: none for k = 1 or 2), then
+        # with k - 1 odd the last point, from a
+        B.repeat(div(sub(n, 2), 2), [
+            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+        B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
         B.pen_up(),
     ]
     return load + [B.if_(lt(a2, 0), fill)]
@@ -463,7 +468,7 @@ def _render_blocks(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     k = r.v("_k")
     fill = _fill_blocks(r)
-    start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size)]
+    start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size), r.set("_pc", "")]
     # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
     start.append(B.switch_costume("fence"))
     start.append(B.call("project vertices"))
@@ -474,12 +479,12 @@ def _render_blocks(r: ReaderBuilder) -> None:
             r.set("_k", 1),
             B.repeat(div(B.list_length(ranges), 2), [
                 r.set("_b", sub(mul(item(k, ranges), 4), 3)),
-                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", 4)]),
+                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", 2)]),
                 r.change("_k", 2),
             ]),
         ]
     else:  # no tree: the list's order
-        frame = [r.set("_b", 1), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 4)])]
+        frame = [r.set("_b", 1), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 2)])]
     r.define("render", [], start + frame)
 
 

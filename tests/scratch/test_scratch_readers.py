@@ -265,14 +265,18 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
     verts = np.concatenate([tri_px / 60.0, np.zeros((T, 3, 1))], axis=2).reshape(-1, 3)
     lists = {"verts": [float(x) for x in verts.ravel()],
              "tris": [int(x) for t in range(T) for x in (3 * t + 1, 3 * t + 2, 3 * t + 3, 1)],
-             "tri colors": [int(c) for c in np.random.default_rng(5).choice(1 << 24, T, replace=False)]}
+             # pairs of neighbours share a colour: the filler sets the pen's colour only when it changes
+             "tri colors": [int(c) for c in np.repeat(np.random.default_rng(5).choice(1 << 24, T, replace=False), 2)[:T]]}
     spec = readers.ReaderSpec(mesh=readers.MeshNames(mat_colors=None, tri_colors="tri colors"), bvh=None, textimage=False,
                               bounds=readers.bounding_sphere(lists["verts"]))
     sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))
     data, _ = sb3.write_sb3([sb3.Target("Stage", is_stage=True, lists=lists), sprite])
     path = tmp_path / "filler.sb3"
     path.write_bytes(data)
-    run = vm({"load": str(path), "runs": [call("Mesh", "render", pen=True, set=camera_vars(cam))]})["runs"][0]
+    # _pc, the colour the filler last gave the pen, is left holding the first triangle's colour while
+    # the pen is still the default blue: the frame must not trust a value from before it
+    init = dict(camera_vars(cam), _pc=lists["tri colors"][0])
+    run = vm({"load": str(path), "runs": [call("Mesh", "render", pen=True, set=init)]})["runs"][0]
     assert run["done"]
     px, py, _ = readers.project(verts, cam)
     P = np.stack([px, py], axis=1).reshape(T, 3, 2)
@@ -292,6 +296,9 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
     for t, g in enumerate(groups):
         A, B, C = P[t]
         seg = g[1:, :4]
+        # every stroke in the triangle's colour (the pen's HSV round trip moves a channel by <= 1)
+        rgb = np.array([(lists["tri colors"][t] >> s) & 255 for s in (16, 8, 0)])
+        assert np.abs(g[:, 5:8] - rgb).max() <= 2, (t, g[:, 5:8].tolist(), rgb)
         # cost: the rule, counted independently of the blocks; the pen goes down at the first
         # point of the fan, in the middle of the first of the k pieces of b-c
         k = max(1, math.ceil(math.sqrt(float(((C - B) ** 2).sum()))))

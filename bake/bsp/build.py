@@ -803,8 +803,6 @@ class _Builder:
         firsts = np.ones(len(oo), bool)
         firsts[1:] = nodes[oo][1:] != nodes[oo][:-1]
         best = oo[firsts]
-        if False:
-            print("ensemble costs", tri, "sizes", m[:3], "picked", best)
         self.graft(b, tr, root, best, node_of[nodes[best]], dup)
         done[nodes[best]] = True
         self.stats["ensembles"] += len(best)

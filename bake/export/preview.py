@@ -398,7 +398,8 @@ def stage_agreement(stage: np.ndarray, view: View, painter: Image, *, margin: in
 
     A pixel is *interior* when the preview shows the same triangle at every pixel within
     ``margin`` pixels of it (so no triangle edge, and no pen stroke of a neighbour, is near) and
-    *empty* when the preview shows no triangle within ``margin``. Returns: the fraction of interior
+    *empty* when the preview shows no triangle within ``margin`` (pixels nearer the image's border
+    than ``margin`` are neither: what lies beyond it is not rendered). Returns: the fraction of interior
     pixels whose colour is within 0, 1, 2 and 8 levels (largest channel difference), the interior
     pixels the player left as background, the empty pixels it painted, and the counts.
 
@@ -411,14 +412,16 @@ def stage_agreement(stage: np.ndarray, view: View, painter: Image, *, margin: in
     H, W = tid.shape
     if stage.shape[:2] != (H, W):
         raise ValueError(f"stage image is {stage.shape[1]}x{stage.shape[0]}, the preview {W}x{H}")
-    pad = np.pad(tid, margin, mode="edge")
+    # beyond the image nothing is known (-2): a pixel nearer the border than ``margin`` is neither
+    # interior nor empty (a stage cut through the model has triangle edges just outside it)
+    pad = np.pad(tid, margin, constant_values=-2)
     same = np.ones((H, W), bool)
     none = np.ones((H, W), bool)
     for dy in range(-margin, margin + 1):
         for dx in range(-margin, margin + 1):
             win = pad[margin + dy:margin + dy + H, margin + dx:margin + dx + W]
             same &= win == tid
-            none &= win < 0
+            none &= win == -1
     interior = same & (tid >= 0)
     empty = none & (tid < 0)
     d = np.abs(stage.astype(np.int16) - view.painter.astype(np.int16)).max(2)

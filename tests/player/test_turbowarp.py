@@ -164,3 +164,61 @@ def test_problems_are_reported(tmp_path):
     assert bl.done and bl.errors == [] and bl.problems() == ["the stage is blank"]
     assert any("asset missing from the archive" in e and gone in e for e in mi.errors), mi.errors
     assert mi.runs == [] and mi.problems()
+
+
+def test_an_unsafe_frame_draws_the_usable_triangles(played, tmp_path):
+    """The green-flag frame made unsafe in TurboWarp: the camera's focal length 30 times the green
+    flag's and turned 16 degrees left, so that the model's picture reaches far beyond 4000 pixels
+    to the right while its left silhouette crosses the stage. ``_safe`` is false, vertices beyond
+    the pen's reach are marked through their screen x, and the stage, compiled and interpreted
+    alike, agrees with the preview of exactly the triangles ``readers.drawn`` says the reader
+    fills (a triangle drawn with a marked corner paints the empty part of the stage)."""
+    import dataclasses
+    import zipfile
+
+    from bake.scratch import readers
+
+    pid = "teapot" if "teapot" in played["projects"] else "demo"
+    project, _ = sb3.load_project(played["projects"][pid])
+    lists = {n: items for t in project["targets"] for n, items in (t.get("lists") or {}).values()}
+    cam = auto_camera(lists["verts"])
+    cam = dataclasses.replace(cam, focal=cam.focal * 30, yaw=cam.yaw - 16)
+    px, py, pz = readers.project(np.asarray(lists["verts"], np.float64).reshape(-1, 3), cam)
+    ok = readers.usable(px, py, pz, cam.near, cam.focal)
+    assert not readers.safe_frame(cam, readers.bounding_sphere(lists["verts"])) and (~ok).any() and ok.any()
+    # the same project with the Mesh sprite's focal variable and the green flag's yaw changed
+    src = zipfile.ZipFile(played["projects"][pid])
+    sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
+    for v in sprite["variables"].values():
+        if v[0] == "focal":
+            v[1] = cam.focal
+    sets = [b for b in sprite["blocks"].values() if isinstance(b, dict) and b["opcode"] == "data_setvariableto"
+            and b["fields"]["VARIABLE"][0] == "cam yaw"]
+    assert len(sets) == 1
+    sets[0]["inputs"]["VALUE"] = [1, [10, repr(cam.yaw)]]
+    path = tmp_path / "unsafe.sb3"
+    with zipfile.ZipFile(path, "w") as z:
+        for name in src.namelist():
+            z.writestr(name, sb3.dumps(project) if name == "project.json" else src.read(name))
+    run = turbowarp.run([("unsafe", path)], modes=("compiled", "interpreted"),
+                        read={"target": "Mesh", "variables": ["_safe", "cam yaw", "focal"]})
+    # the preview of the drawn triangles only: the others collapsed to their first corner (no
+    # area, and the tree's triangle numbers stay)
+    two = lists.get("mat two-sided") or []
+    keep = readers.drawn(lists["verts"], lists["tris"], cam, two)
+    assert keep.any() and not keep.all()
+    t = np.asarray(lists["tris"], np.int64).reshape(-1, 4).copy()
+    t[~keep, 1] = t[~keep, 2] = t[~keep, 0]
+    sub = dict(lists, tris=[int(x) for x in t.ravel()])
+    report = {"config": {"export": {"names": {}}},
+              "materials": [{"double_sided": bool(x)} for x in (two or [0] * len(lists.get("mat colors", [])))]}
+    view, painter = preview.stage_view(preview.mesh_from_lists(sub, report), cam)
+    assert 0.1 < (painter.tri_id < 0).mean() < 0.9  # both model and empty stage in view
+    for r in run.results:
+        assert r.problems() == [], f"{r.mode}: {r.problems()}"
+        assert str(r.variables.get("_safe")).lower() in ("false", "0"), r.variables
+        assert float(r.variables["cam yaw"]) == cam.yaw and float(r.variables["focal"]) == cam.focal
+        a = preview.stage_agreement(r.image, view, painter)
+        assert a["interior_pixels"] > 1000, a
+        assert a["within_1"] == 1.0 and a["interior_left_blank"] == 0 and a["empty_painted"] == 0, f"{r.mode}: {a}"
+    assert np.array_equal(run.get("unsafe", "compiled").image, run.get("unsafe", "interpreted").image)

@@ -273,16 +273,37 @@ def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndar
     hash: vectorised, deterministic)."""
     if len(d) == 0:
         return np.zeros(0, np.int64)
-    m = min(len(d), 64 * k)
-    cand = np.argpartition(-d, m - 1)[:m] if m < len(d) else np.arange(len(d))
-    cand = cand[np.lexsort((cand, -d[cand]))]
-    box = np.floor(P[cand] / max(apart, 1e-300)).astype(np.int64)
-    box -= box.min(axis=0)
-    span = box.max(axis=0) + 1
-    flat = (box[:, 0] * span[1] + box[:, 1]) * span[2] + box[:, 2]
-    _, first = np.unique(flat, return_index=True)
-    first.sort()
-    return cand[first[:k]]
+    full = min(len(d), 64 * k)
+    # the largest 4k first: if their first k boxes are all found before the smallest distance
+    # taken (so no tie at that distance can be missing from the prefix), the answer is the
+    # same as from all 64k
+    m = min(full, 4 * k)
+    while True:
+        cand = np.argpartition(-d, m - 1)[:m] if m < len(d) else np.arange(len(d))
+        cand = cand[np.lexsort((cand, -d[cand]))]
+        box = np.floor(P[cand] / max(apart, 1e-300)).astype(np.int64)
+        box -= box.min(axis=0)
+        span = box.max(axis=0) + 1
+        flat = (box[:, 0] * span[1] + box[:, 1]) * span[2] + box[:, 2]
+        _, first = np.unique(flat, return_index=True)
+        first.sort()
+        if m == full or (len(first) >= k and d[cand[first[k - 1]]] > d[cand[-1]]):
+            return cand[first[:k]]
+        m = full
+
+
+def _append(st: dict, name: str, add: np.ndarray) -> None:
+    """``st[name] = concatenate([st[name], add])``, amortised: ``st[name]`` is a view of the
+    first rows of a buffer (``st["_" + name]``) that doubles when full."""
+    cur = st[name]
+    n, k = len(cur), len(add)
+    buf = st.get("_" + name)
+    if buf is None or n + k > len(buf):
+        buf = np.empty((max(2 * (n + k), 1024),) + cur.shape[1:], cur.dtype)
+        buf[:n] = cur
+        st["_" + name] = buf
+    buf[n:n + k] = add
+    st[name] = buf[:n + k]
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
@@ -332,13 +353,12 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         tn = np.empty(len(uk), np.int64)  # the triangle of X a midpoint lies in
         tn[inv] = np.tile(ctri[sel], 3)
         dn, nn = index_y.distance(Pn)
-        st["P"] = np.concatenate([allP, Pn])
-        st["D"] = np.concatenate([st["D"], dn])
-        st["T"] = np.concatenate([st["T"], tn[new]])
-        st["N"] = np.concatenate([st["N"], nn])
-        order = np.argsort(np.concatenate([mk, uk[new]]), kind="stable")
-        st["mid_keys"] = np.concatenate([mk, uk[new]])[order]
-        st["mid_ids"] = np.concatenate([mi, ids[new]])[order]
+        for name, add in (("P", Pn), ("D", dn), ("T", tn[new]), ("N", nn)):
+            _append(st, name, add)
+        # both key lists are sorted and share no key: merge them
+        at = np.searchsorted(mk, uk[new])
+        st["mid_keys"] = np.insert(mk, at, uk[new])
+        st["mid_ids"] = np.insert(mi, at, ids[new])
         m = ids[inv].reshape(3, -1)  # midpoints of sides ab, bc, ca of each selected cell
         A, B, Cc = c[:, 0], c[:, 1], c[:, 2]
         kids = np.concatenate([np.stack([A, m[0], m[2]], 1), np.stack([m[0], B, m[1]], 1),
@@ -360,14 +380,16 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         c = st["cells"][sel]
         near_c = st["N"][c]
         allP = st["P"]
-        bound = np.full(len(sel), np.inf)
-        for j in range(3):
-            cols = np.take(index_y.table, np.maximum(near_c[:, j], 0), axis=1)
-            m = np.zeros(len(sel))
-            for i in range(3):
-                m = np.maximum(m, _pair_dist2(allP[c[:, i]], cols))
-            m[near_c[:, j] < 0] = np.inf
-            bound = np.minimum(bound, m)
+        # the nine (corner, closest triangle of a corner) pairs of each cell; neighbouring cells
+        # share most of them, so each distinct pair is measured once
+        nT = np.int64(len(index_y.F))
+        pt = np.repeat(c, 3, axis=1)  # (s, 9): column 3 i + j pairs corner i ...
+        tr = np.maximum(np.tile(near_c, (1, 3)), 0)  # ... with the closest triangle of corner j
+        uk, inv = np.unique(pt.ravel() * nT + tr.ravel(), return_inverse=True)
+        d2 = _pair_dist2(allP[uk // nT], np.take(index_y.table, uk % nT, axis=1))
+        m = d2[inv.reshape(-1)].reshape(-1, 3, 3).max(axis=1)  # (s, 3): the largest over the corners
+        m[near_c < 0] = np.inf
+        bound = m.min(axis=1)
         # the distances are upper bounds (some far above the truth): the share is taken of
         # the largest distance made exact so far, a lower bound of the maximum
         return sel[np.sqrt(bound) > KEEP_SHARE * st["lb"]]
@@ -404,7 +426,8 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
             if len(ids):
                 _, nn = cKDTree(allP[ids]).query(extra[0], k=min(3, len(ids)))
                 hot[ids[np.asarray(nn).ravel()]] = True
-        sel = can_rise(np.flatnonzero(hot[st["cells"]].any(axis=1)))
+        cells = st["cells"]
+        sel = can_rise(np.flatnonzero(hot[cells[:, 0]] | hot[cells[:, 1]] | hot[cells[:, 2]]))
         if len(sel) == 0:
             break
         pool = np.concatenate([top, split(sel)])

@@ -92,7 +92,7 @@ from .simplify_error import (FlipResult, SurfaceIndex, bounding_spheres, edge_co
                              triangle_pattern)
 from .simplify_fit import refit
 from . import simplify_measure as _measure_mod
-from .simplify_measure import HausdorffResult, directed, hausdorff, surface_grid
+from .simplify_measure import HausdorffResult, directed, hausdorff, original_side, surface_grid
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
@@ -1283,11 +1283,12 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             t = time.perf_counter()
             # the input's side first (its grid against the small result: cheap); the other side,
             # against the input, only if that alone does not already keep the fit
-            hl = directed(SurfaceIndex(out.V, out.F), grid_a, seeds=4 * _measure_mod.SEEDS,
-                          rounds=_FIT_CHECK_ROUNDS)
+            ib = SurfaceIndex(out.V, out.F)
+            hl = original_side(ib, grid_a, rounds=_FIT_CHECK_ROUNDS, straddling=False)
             if h1.max > _FIT_TOLERANCE * hl.max:
                 hl = hausdorff(prep.V, prep.F, out.V, out.F, points=cfg.error_samples, index_a=index_a,
-                               grid_a=grid_a, rounds=_FIT_CHECK_ROUNDS, straddling=False)
+                               grid_a=grid_a, index_b=ib, rounds=_FIT_CHECK_ROUNDS, straddling=False,
+                               a_to_b=hl)
             ctx.measures += 1
             ctx.measure_seconds += time.perf_counter() - t
         check = {"max_with_fit": float(h1.max / scale), "max_without_fit_at_least": float(hl.max / scale)}

@@ -62,7 +62,7 @@ from scipy.spatial import cKDTree
 
 from .simplify_error import SurfaceIndex, _pair_dist2, _verify
 
-__all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "hausdorff"]
+__all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "original_side", "hausdorff"]
 
 # finest grid level per triangle: at most 2**_MAX_LEVEL parts per edge before refinement
 _MAX_LEVEL = 6
@@ -298,7 +298,7 @@ def _append(st: dict, name: str, add: np.ndarray) -> None:
     cur = st[name]
     n, k = len(cur), len(add)
     buf = st.get("_" + name)
-    if buf is None or n + k > len(buf):
+    if buf is None or cur.base is not buf or n + k > len(buf):  # (not a view of it: start a new one)
         buf = np.empty((max(2 * (n + k), 1024),) + cur.shape[1:], cur.dtype)
         buf[:n] = cur
         st["_" + name] = buf
@@ -489,12 +489,22 @@ class HausdorffResult:
         return np.concatenate([self.a_to_b.top_dists, self.b_to_a.top_dists]) if self.a_to_b else np.zeros(0)
 
 
+def original_side(index_b: SurfaceIndex, grid_a: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
+                  straddling: bool = True) -> Directed:
+    """The original -> simplified direction of :func:`hausdorff` on its own (the original's
+    side is cheap to measure, the simplified mesh is small: with ``straddling`` its cells that
+    straddle two triangles of the simplified mesh and may hold more than KEEP_SHARE of the
+    maximum are cut once, and it takes four times the seeds)."""
+    return directed(index_b, grid_a, seeds=4 * seeds, rounds=rounds, straddling=straddling)
+
+
 def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, points: int = 20000,
               index_a: SurfaceIndex | None = None, grid_a: SurfaceGrid | None = None,
               index_b: SurfaceIndex | None = None, seeds: int = SEEDS, rounds: int = ROUNDS,
-              straddling: bool = True) -> HausdorffResult:
+              straddling: bool = True, a_to_b: Directed | None = None) -> HausdorffResult:
     """Symmetric Hausdorff distance between surface A (original) and B (simplified), each
-    direction on a grid of about ``points`` points refined around its peaks."""
+    direction on a grid of about ``points`` points refined around its peaks. ``a_to_b``: that
+    direction already measured (:func:`original_side` with the same index, grid and options)."""
     Fa = np.asarray(Fa, np.int64).reshape(-1, 3)
     Fb = np.asarray(Fb, np.int64).reshape(-1, 3)
     if len(Fa) == 0 or len(Fb) == 0:
@@ -507,10 +517,7 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     # narrow pits hide under big triangles between coarser grid points), at most 4x ``points``
     gb = surface_grid(Vb, Fb, max(points, min(POINTS_PER_SIMPLIFIED * len(Fb), 4 * points)),
                       min_level=MIN_LEVEL_SIMPLIFIED)
-    # the original's side is cheap to measure (the simplified mesh is small): its cells that
-    # straddle two triangles of the simplified mesh and may hold more than KEEP_SHARE of the
-    # maximum are cut once, and four times the seeds
-    ab = directed(ib, ga, seeds=4 * seeds, rounds=rounds, straddling=straddling)
+    ab = a_to_b if a_to_b is not None else original_side(ib, ga, seeds=seeds, rounds=rounds, straddling=straddling)
     # (the simplified side's cells are cut around its seeds only, as before: its bound, to one
     # small triangle of the original, is too loose to leave many out, and costs a tenth)
     # a peak of the simplified side over a narrow pit of the original can sit between grid points

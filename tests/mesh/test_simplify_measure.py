@@ -205,3 +205,37 @@ def test_peak_over_a_narrow_pit_between_the_simplified_sides_grid_points_is_foun
     assert h.b_to_a.spacing > 2 / 30  # the grid is coarser than the pit
     assert 0.98 * want <= h.max_b_to_a <= want * (1 + 1e-9)
     assert h.max_a_to_b == pytest.approx(0.3, abs=1e-3)  # the pit's tip
+
+
+def _distinct_top_reference(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> list[int]:
+    """The seeds computed from all 64 k largest distances at once (what _distinct_top did before
+    it tried the largest 4 k first), walked one point at a time: in order of distance (ties in
+    the order numpy's partition and the index give), the first point of each box of side
+    ``apart``, up to k of them."""
+    m = min(len(d), 64 * k)
+    cand = np.argpartition(-d, m - 1)[:m] if m < len(d) else np.arange(len(d))
+    seen, out = set(), []
+    for i in sorted(cand.tolist(), key=lambda i: (-d[i], i)):
+        box = tuple(np.floor(P[i] / apart).astype(np.int64).tolist())
+        if box not in seen:
+            seen.add(box)
+            out.append(i)
+            if len(out) == k:
+                break
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_seeds_taken_from_the_largest_distances_first_are_the_defined_ones(seed):
+    """_distinct_top tries the largest 4 k distances before the 64 k it is defined on; with
+    heavy ties (a few distinct values, so ties straddle the 4 k boundary) and with spread-out
+    values it must pick exactly the reference's points."""
+    from bake.mesh.simplify_measure import _distinct_top
+
+    rng = np.random.default_rng(seed)
+    n = 3000
+    P = rng.random((n, 3))
+    for d in (rng.integers(0, 3, n).astype(np.float64), rng.random(n)):
+        for k, apart in ((1, 0.5), (8, 0.25), (40, 0.1), (200, 0.05)):
+            got = _distinct_top(P, d, k, apart).tolist()
+            assert got == _distinct_top_reference(P, d, k, apart), (k, apart)

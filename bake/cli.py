@@ -64,6 +64,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     from . import pipeline
     from .export import output, report
 
+    _check_output_names(cfg)
     output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
     _check_into(cfg)
     prog = _Progress(quiet, total=_stage_count(cfg))
@@ -111,20 +112,42 @@ def _known_inputs(cfg: config_mod.Config) -> list[Path]:
     return out
 
 
-def _known_outputs(cfg: config_mod.Config) -> list[str]:
-    """Output names known before the bake starts."""
+def _output_names(cfg: config_mod.Config) -> list[tuple[str, str, str]]:
+    """(key that names it, name, what it is) of each output known before the bake starts."""
     ex = cfg.export
     model = _model_path(cfg)
     stem = model.stem if model is not None else "model"
-    names = [ex.json_name] if ex.json else []
+    out = [("export.json_name", ex.json_name, "the lists' JSON")] if ex.json else []
     sb3_name = ex.sb3_name or f"{stem}.sb3"
     if ex.sb3:
-        names.append(sb3_name)
+        out.append(("export.sb3_name", sb3_name, "the .sb3"))
     if ex.sprite3:
-        names.append(f"{Path(sb3_name).stem}.sprite3")
+        out.append(("export.sb3_name", f"{Path(sb3_name).stem}.sprite3", "the .sprite3 (named after the .sb3)"))
     if ex.into:
-        names.append(ex.into_name or f"{Path(ex.into).stem}-{stem}.sb3")
-    return names
+        out.append(("export.into_name", ex.into_name or f"{Path(ex.into).stem}-{stem}.sb3",
+                    "the export.into project"))
+    return out
+
+
+def _known_outputs(cfg: config_mod.Config) -> list[str]:
+    """Output names known before the bake starts."""
+    return [name for _, name, _ in _output_names(cfg)]
+
+
+def _check_output_names(cfg: config_mod.Config) -> None:
+    """Two outputs with one name would leave only one of them (a file system that ignores case
+    counts too): exit 2 before baking, naming the key."""
+    if not cfg.export.enabled:
+        return
+    seen: dict[str, tuple[str, str]] = {}
+    for key, name, what in _output_names(cfg):
+        other = seen.get(name.lower())
+        if other is not None:
+            # blame the key the user set (a default name clashing with a chosen one)
+            blame = other[0] if other[0] in cfg.given and key not in cfg.given else key
+            raise config_mod.error_at(cfg, blame, f"'{name}' would name both {other[1]} ({other[0]}) and "
+                                                  f"{what} ({key}); choose another name")
+        seen[name.lower()] = (key, what)
 
 
 def _check_into(cfg: config_mod.Config) -> None:
@@ -205,7 +228,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for m in data["materials"]:
         tex = f", texture {m['texture']}" if m["texture"] else ""
         print(f"    {m['name']}: rgba {m['color']}{tex}")
-    print("  lists (with the current export settings):")
+    print("  lists of the mesh as imported and cleaned, with the current export settings (the stages after\n"
+          "  clean -- simplify, BSP, BVH, lighting, textures -- change or add lists; `bake run` reports those):")
     for k, v in data["lists"].items():
         print(f"    {k:<14} {v['items']:>8} items  {v['project_json_bytes']:>9} bytes")
     for w in data["warnings"]:

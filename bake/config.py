@@ -616,6 +616,7 @@ class _Where:
         field after the array starts, else the array's line."""
         seen = -1
         start = None
+        field = None if rest is None else re.escape(rest.split(".")[0].split("[")[0])  # direction[1] -> direction
         for i, raw in enumerate(self.lines, 1):
             s = raw.strip()
             h = re.match(r"^\[\[\s*([^\]]+?)\s*\]\]$", s)
@@ -627,16 +628,16 @@ class _Where:
                     start = i
                     if rest is None:
                         return i
-            elif start is not None and rest is not None and re.match(rf"^{re.escape(rest.split('.')[0])}\s*=", s):
+            elif start is not None and field is not None and re.match(rf"^{field}\s*=", s):
                 return i
         if start is not None:
             return start
         name = table.rsplit(".", 1)[-1]
         for i, raw in enumerate(self.lines, 1):  # inline: lights = [{...}] or lighting.lights = [...]
             if re.match(rf"^\s*(?:[\w.]*\.)?{re.escape(name)}\s*=", raw):
-                if rest is not None:
+                if field is not None:
                     for j in range(i, len(self.lines) + 1):
-                        if re.search(rf"\b{re.escape(rest.split('.')[0])}\s*=", self.lines[j - 1]):
+                        if re.search(rf"\b{field}\s*=", self.lines[j - 1]):
                             return j
                 return i
         return None
@@ -918,6 +919,12 @@ def get_key(cfg: Any, key: str) -> Any:
     return obj
 
 
+# Names in the output folder that every bake writes (the reports, the list and asset folders,
+# bake watch's script, the sweeps and the xatlas cache): no configured output name may take one.
+RESERVED_OUTPUT_NAMES = ("report.json", "report.md", "report.html", "report-live.js", "lists", "assets", "sweeps",
+                         ".bake-cache")
+
+
 def validate(cfg: Config) -> None:
     """Range checks that types alone cannot express."""
     def need(cond: bool, key: str, msg: str) -> None:
@@ -963,9 +970,14 @@ def validate(cfg: Config) -> None:
     need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
     need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
     need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
-    sb3_name = cfg.export.sb3_name
-    need(not sb3_name or (Path(sb3_name).name == sb3_name and sb3_name not in (".", "..")), "export.sb3_name",
-         "must be a file name, not a path")
+    for key, name, blank in (("export.json_name", cfg.export.json_name, False),
+                             ("export.sb3_name", cfg.export.sb3_name, True),
+                             ("export.into_name", cfg.export.into_name, True)):
+        need(bool(name) or blank, key, "must be a file name (it is empty)")
+        need(not name or (Path(name).name == name and "\\" not in name and name not in (".", "..")), key,
+             "must be a file name, not a path")
+        need(name.lower() not in RESERVED_OUTPUT_NAMES, key,
+             f"'{name}' is a name the bake writes itself ({', '.join(RESERVED_OUTPUT_NAMES)}); choose another")
     for i, lt in enumerate(cfg.lighting.lights):
         need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
         need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")

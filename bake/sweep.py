@@ -41,6 +41,7 @@ import copy
 import io
 import json
 import math
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -128,6 +129,16 @@ def _with_value(cfg: Config, key: str, value: Any) -> Config:
     config_mod.apply_override(c, f"{key}={text}")
     config_mod.validate(c)
     return c
+
+
+def _value_config(cfg: Config, key: str, value: Any, flag: str) -> Config:
+    """:func:`_with_value`, with an error naming the sweep's option (``--vary``, ``--reference``)
+    that gave the value instead of the ``--set`` it is applied as."""
+    try:
+        return _with_value(cfg, key, value)
+    except ConfigError as e:
+        msg = re.sub(r" \(from --set .* on the command line\)$", "", e.message)
+        raise ConfigError(f"{flag} value {value!r}: {msg}", key=e.key or key) from None
 
 
 @dataclass
@@ -295,14 +306,19 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         stage_cache = cache_mod.StageCache.for_config(base) if cache == "auto" else cache
         stage_cache = stage_cache or cache_mod.StageCache.in_memory()
     say = progress or (lambda _msg: None)
+    # every value is checked before the first bake, and a bad one is named as the sweep's own
+    cfgs = {v: _value_config(base, key, v, "--vary") for v in vals}
+    ref_cfg = None
+    if reference is not None and not isinstance(reference, Scene):
+        ref_cfg = _value_config(base, key, reference, "--reference")
     if len(vals) > 1:  # a warm-up bake, not timed: the first bake also pays for loading libraries
         say(f"warm-up bake at {key} = {vals[0]} (not timed: it loads the libraries"
             + (" and stores the stages before the key's)" if stage_cache is not None else ")"))
-        _bake(_with_value(base, key, vals[0]), scene, key, stage_cache)
+        _bake(cfgs[vals[0]], scene, key, stage_cache)
     runs = {}
     for i, v in enumerate(vals, 1):  # one bake per value
         say(f"bake {i}/{len(vals)}: {key} = {v}")
-        runs[v] = _bake(_with_value(base, key, v), scene, key, stage_cache)
+        runs[v] = _bake(cfgs[v], scene, key, stage_cache)
     if stage_cache is not None:  # what a new folder's cache kept back: the sweep's bakes succeeded
         stage_cache.store.flush()
     ref_desc: dict[str, Any]
@@ -314,7 +330,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
         ref_desc = {"kind": "scene"}
     else:
         say(f"reference bake at {key} = {reference}")
-        ref_run = _bake(_with_value(base, key, reference), scene, key, stage_cache)
+        ref_run = _bake(ref_cfg, scene, key, stage_cache)
         ref_desc = {"kind": "reference run", "value": reference, "seconds": round(ref_run.seconds, 6),
                     "total_seconds": round(ref_run.total, 6)}
     ref_colors = _colors(reference if isinstance(reference, Scene) else ref_run.scene)

@@ -131,6 +131,16 @@ def test_light_fields_are_checked_like_any_key_naming_the_line(tmp_path):
     assert [lt.angle for lt in cfg.lighting.lights] == [2.0, 3.0]
 
 
+@pytest.mark.parametrize("field,value,key", [("direction", '[0.5, "x", 1]', "direction[1]"),
+                                             ("color", '[1, 1, "white"]', "color[2]")])
+def test_a_bad_element_of_a_light_field_names_the_field_line(tmp_path, field, value, key):
+    """A bad item inside a light's array names the line of that field, not the block's header
+    (a user's review: line 7, the [[lighting.lights]] line, for a bad direction on line 10)."""
+    with pytest.raises(ConfigError, match="expected a number") as e:
+        config.load(write(tmp_path, LIGHTS_TOML.format(field=field, value=value)))
+    assert e.value.key == f"lighting.lights[1].{key}" and e.value.line == 10
+
+
 def test_light_fields_by_set_and_in_bake_keys(capsys):
     cfg = config.load(None, ["lighting.lights[0].intensity=2", "lighting.lights[0].kind=\"point\"",
                              "lighting.lights[1].angle=4"])

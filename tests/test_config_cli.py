@@ -179,3 +179,31 @@ def test_non_utf8_warning_names_the_file(tmp_path):
     warns = [ln for ln in r.stdout.splitlines() if "not UTF-8" in ln]
     assert warns and all("m.obj" in w or "m.mtl" in w for w in warns), warns
     assert any("m.obj" in w for w in warns), warns
+
+
+@pytest.mark.parametrize("setting,key,what", [
+    ("export.json_name=../escape.json", "export.json_name", "must be a file name, not a path"),
+    ("export.json_name=", "export.json_name", "it is empty"),
+    ("export.json_name=report.json", "export.json_name", "a name the bake writes itself"),
+    ("export.sb3_name=report.html", "export.sb3_name", "a name the bake writes itself"),
+    ("export.sb3_name=Report.MD", "export.sb3_name", "a name the bake writes itself"),
+    ("export.into_name=lists", "export.into_name", "a name the bake writes itself"),
+    ("export.json_name=m.sb3", "export.json_name", "would name both the lists' JSON"),
+    ("export.json_name=M.sprite3", "export.json_name", "would name both the lists' JSON"),
+    ("export.sb3_name=lists.json", "export.sb3_name", "would name both the lists' JSON"),
+])
+def test_output_names_are_checked_before_the_bake(layout, setting, key, what):
+    """A user's review: export.json_name was never checked (a path failed after the bake with
+    exit 1, report.json crashed, the .sb3's name failed as "bad input"), and export.sb3_name =
+    report.html silently lost the project. Now each is exit 2 before baking, naming the key the
+    user set, and no output folder is made."""
+    r = bake(["run", "cfg/bake.toml", "--out", "o", "--quiet", "--set", setting], cwd=layout)
+    line = error_line(r, 2)
+    assert f"key '{key}'" in line and what in line, line
+    assert not (layout / "o").exists()
+
+
+def test_output_name_clash_in_a_config_names_its_line(layout):
+    (layout / "cfg" / "bake.toml").write_text('[input]\npath = "m.obj"\n[export]\njson_name = "m.sb3"\n')
+    line = error_line(bake(["run", "cfg/bake.toml", "--out", "o", "--quiet"], cwd=layout), 2)
+    assert "bake.toml:4: key 'export.json_name'" in line, line

@@ -88,6 +88,22 @@ def test_sweep_against_highest_value_and_errors():
         sweep(_cfg(), "lighting.ao.nope", [1], scene=sc)
 
 
+def test_sweep_checks_every_value_before_baking_and_names_its_option(monkeypatch):
+    """A user's review: a bad --vary or --reference value failed after the warm-up and the
+    first bakes, blamed on "--set". Every value is checked first, and the message names the
+    sweep's option."""
+    import bake.sweep as sweep_mod
+
+    baked = []
+    monkeypatch.setattr(sweep_mod, "_bake", lambda *a, **k: baked.append(a) or (_ for _ in ()).throw(AssertionError))
+    with pytest.raises(ConfigError, match=r"--vary value 0: must be >= 1") as e:
+        sweep(_cfg(), "lighting.ao.samples", [16, 0], scene=_scene())
+    assert e.value.key == "lighting.ao.samples" and "--set" not in str(e.value)
+    with pytest.raises(ConfigError, match=r"--reference value 2.5: expects an integer"):
+        sweep(_cfg(), "lighting.ao.samples", [16, 64], reference=2.5, scene=_scene())
+    assert baked == []
+
+
 def test_sweep_soft_shadow_samples():
     sc = _scene(41)
     cfg = _cfg()

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .report import _fmt_bytes, cache_note
+from .report import _fmt_bytes, cache_note, fmt_unit
 from .write import write_atomic
 
 HTML_NAME = "report.html"
@@ -244,10 +244,9 @@ def _faces(counts: dict) -> str:
 
 
 def _fmt_accuracy(key: str, v: Any) -> str:
-    """Distances the stages record as fractions of the diagonal read as a percentage."""
-    if key.startswith("hausdorff") and isinstance(v, float):
-        return f"{100 * v:.3g}% of the diagonal"
-    return _fmt(v)
+    """Figures with a unit as the terminal and report.md show them (``report.fmt_unit``)."""
+    unit = fmt_unit(key, v)
+    return unit if unit is not None else _fmt(v)
 
 
 def _stages_section(report: dict) -> str:

@@ -143,11 +143,24 @@ def _counts(c: dict) -> str:
     return ", ".join(parts)
 
 
+def fmt_unit(key: str, v: Any, short: bool = False) -> str | None:
+    """An accuracy figure that has a unit, with it (None for the rest): Hausdorff distances are
+    fractions of the bounding-box diagonal, shown as a percentage of it; the BSP's
+    ``inflation`` (triangles out / in - 1) as a signed percentage (1.07 reads +107%)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    if key.startswith("hausdorff"):
+        return f"{100 * v:.3g}%" + ("" if short else " of the diagonal")
+    if key == "inflation":
+        return f"{100 * v:+.1f}%" + ("" if short else " triangles")
+    return None
+
+
 def fmt_accuracy(key: str, v: Any) -> str:
-    """An accuracy figure with its unit: Hausdorff distances are fractions of the bounding-box
-    diagonal, shown as a percentage of it."""
-    if key.startswith("hausdorff") and isinstance(v, float):
-        return f"{100 * v:.3g}% of the diagonal"
+    """An accuracy figure with its unit (:func:`fmt_unit`), else as it is."""
+    unit = fmt_unit(key, v)
+    if unit is not None:
+        return unit
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         return str(v)
     return f"{v:.4g}"
@@ -225,7 +238,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
              f"{s['materials']} materials in {report['seconds']:.2f} s"]
     for st in report["stages"]:
         nums = {k: v for k, v in st["accuracy"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        acc = " ".join(f"{k}={100 * v:.3g}%" if k.startswith("hausdorff") else f"{k}={v:.3g}" for k, v in nums.items())
+        acc = " ".join(f"{k}={fmt_unit(k, v, short=True) or f'{v:.3g}'}" for k, v in nums.items())
         if any(k.startswith("hausdorff") for k in nums):
             acc += " (Hausdorff distances in % of the bounding-box diagonal)"
         note = cache_note(st)

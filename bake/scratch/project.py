@@ -115,6 +115,31 @@ def _has_list(project: Path, name: str) -> bool:
                if isinstance(t, dict) for e in (t.get("lists") or {}).values())
 
 
+def _bake_list_names(cfg: Any) -> set[str]:
+    """Lists a bake writes, whichever stages run: the mesh lists (``export.names``), the packed
+    texts, and the BSP and BVH lists (their readers' names)."""
+    names = {v for v in vars(cfg.names).values() if isinstance(v, str)}
+    bsp, bvh = readers.BSPSpec(), readers.BVHSpec(bary=(0.0, 1.0))
+    return names | {bsp.nodes, bsp.planes, bvh.nodes, bvh.tris, bvh.ids}
+
+
+def _stale_lists(project: Path, target: str, written: dict[str, list], cfg: Any) -> list[str]:
+    """Lists of an earlier bake that a project baked into keeps because this bake does not write
+    them (a BSP tree of another model, colours the new model does not have): the stage's and the
+    target sprite's lists with a bake's list name that is not among ``written``."""
+    try:
+        proj, _ = sb3.load_project(project)
+    except InputError:
+        return []  # merge_into reports it
+    ours = _bake_list_names(cfg) - set(written)
+    found = set()
+    for t in proj.get("targets", []) or []:
+        if isinstance(t, dict) and (t.get("isStage") or t.get("name") == target):
+            found |= {e[0] for e in (t.get("lists") or {}).values()
+                      if isinstance(e, list) and e and isinstance(e[0], str) and e[0] in ours}
+    return sorted(found)
+
+
 def texture_costumes(scene: Any) -> list[sb3.Costume]:
     """The textures stage's PNG costumes (``artefacts["costumes"]``: (name, png bytes)) as
     bitmapResolution-2 costumes centred on the image (sizes read from the PNG header)."""
@@ -230,8 +255,15 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         check_packed_lists(sb3.load_project(data)[0], src)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)
+        stale = _stale_lists(src, target, into_lists, cfg)
+        if stale and record is not None:
+            record.warn(f"export.into: {src.name} keeps list(s) an earlier bake wrote and this one does not: "
+                        f"{', '.join(repr(n) for n in stale)}; they are left as they were, so blocks that read them "
+                        "get the earlier model's data (delete them in the editor, or bake the stage that "
+                        "writes them)")
         details["into"] = {"project": str(src), "target": target, "file": out_name,
-                           "project_json_bytes": sizes["project_json_bytes"], "assets": sizes["assets"]}
+                           "project_json_bytes": sizes["project_json_bytes"], "assets": sizes["assets"],
+                           "stale_lists": stale}
         # the report measures the project the author will upload
         details["project_json_bytes"] = sizes["project_json_bytes"]
         read.append(src)

@@ -151,7 +151,17 @@ def test_stage_table_counts_faces_and_reads_distances_as_percent(baked):
     page = (out / "report.html").read_text(encoding="utf-8")
     assert f"<td class=n>{imp['counts_out']['polygons']:,} polygons</td>" in page
     assert html_mod._fmt_accuracy("hausdorff_max", 0.003525) == "0.352% of the diagonal"
-    assert html_mod._fmt_accuracy("inflation", 0.5) == "0.5"
+    # the BSP's inflation (out / in - 1) as a signed percentage everywhere (a user's review: the
+    # terminal's "inflation=1.07" read like 7% for +107%)
+    assert html_mod._fmt_accuracy("inflation", 0.5) == "+50.0% triangles"
+    assert html_mod._fmt_accuracy("splits", 0.5) == "0.5"
+    from bake.export import report as report_mod
+
+    rep = {"scene": {"triangles": 5602, "vertices": 10, "materials": 1}, "input": {"path": "house.obj"},
+           "seconds": 1.0, "lists": {}, "limits": [], "stages": [{"name": "bsp", "seconds": 0.5, "warnings": [],
+                                                                 "accuracy": {"inflation": 1.0702}}]}
+    assert "inflation=+107.0%" in report_mod.summary_lines(rep)[1]
+    assert report_mod.fmt_accuracy("inflation", 1.0702) == "+107.0% triangles"  # report.md's stage table
 
 
 def test_bar_colours_follow_how_close_a_limit_is():

@@ -150,3 +150,30 @@ def test_report_html_sweep_hint_works_for_the_bake_at_hand(tmp_path, capsys):
                            text=True, timeout=600, cwd=out)
         assert r.returncode == 0, (argv, r.stderr)
         assert "alt='sweep " in (out / "report.html").read_text()  # and the report shows it
+
+
+def test_bake_into_warns_of_lists_an_earlier_bake_left_there(tmp_path, capsys):
+    """A user's review: baking a plain model into an engine that holds an earlier bake's BSP tree
+    and colour lists replaced verts/tris but silently kept 'bsp nodes', 'bsp planes' and 'tri
+    colors' of the old model. The bake now names every such list it leaves (the stage's and the
+    target sprite's; not another sprite's, not the author's own lists) and keeps them untouched."""
+    model = textured(tmp_path / "m")
+    old = {"bsp nodes": [1, 2, 3], "bsp planes": [0.5], "tri colors": [7], "my list": [1], "verts": [0, 0, 0]}
+    data, _ = sb3_mod.write_sb3([sb3_mod.Target("Stage", is_stage=True, lists=dict(old)),
+                                 sb3_mod.Target("Other", layer_order=1, lists={"bvh nodes": [1]})])
+    (tmp_path / "engine.sb3").write_bytes(data)
+    code, out, err = run(capsys, "run", model, "--out", tmp_path / "o",
+                         "--set", f'export.into="{tmp_path / "engine.sb3"}"')
+    assert code == 0, err
+    baked = set(json.loads((tmp_path / "o" / "lists.json").read_text())["lists"])
+    stale = sorted({"bsp nodes", "bsp planes", "tri colors"} - baked)
+    assert "bsp nodes" in stale and "verts" in baked
+    want = "keeps list(s) an earlier bake wrote and this one does not: " + ", ".join(repr(n) for n in stale)
+    assert want + ";" in out + err, out + err
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    export = next(s for s in rep["stages"] if s["name"] == "export")
+    assert export["details"]["into"]["stale_lists"] == stale
+    proj, _ = sb3_mod.load_project(tmp_path / "o" / "engine-m.sb3")
+    stage = next(t for t in proj["targets"] if t["isStage"])
+    lists = {n: v for n, v in stage["lists"].values()}
+    assert all(lists[n] == old[n] for n in stale) and lists["my list"] == [1]

@@ -224,7 +224,6 @@ def main() -> None:
                 row[mode] = {"seconds": r.seconds, "step_seconds": r.step_seconds, "problems": r.problems(),
                              "first_frame_seconds": first, "first_frame_median": float(np.median(first)),
                              "frame_seconds": frame_seconds(r.step_seconds),
-                             "frame_step_seconds": frame_seconds(r.step_seconds),
                              "median_seconds": float(np.median(later))}
             if who == "new":
                 project, _ = sb3.load_project(out)
@@ -271,9 +270,6 @@ def main() -> None:
                 "blocks_per_frame": p["blocks_per_frame"] / n["blocks_per_frame"],
                 "turbowarp_compiled": p["compiled"]["frame_seconds"] / n["compiled"]["frame_seconds"],
                 "turbowarp_interpreted": p["interpreted"]["frame_seconds"] / n["interpreted"]["frame_seconds"],
-                "turbowarp_compiled_steps": p["compiled"]["frame_step_seconds"] / n["compiled"]["frame_step_seconds"],
-                "turbowarp_interpreted_steps": (p["interpreted"]["frame_step_seconds"]
-                                                / n["interpreted"]["frame_step_seconds"]),
                 # the pages run interleaved: round k of the previous reader next to round k of the
                 # new one; the median over rounds (the first, which compiles, left out) of the
                 # ratio of the times inside the VM steps (what the minimum is taken of)

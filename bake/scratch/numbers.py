@@ -18,8 +18,10 @@ from ..errors import StageError
 from ..scene import ScratchList
 
 # A list entry in project.json is  "<20-char id>":["<name>",[items]],  — the id is 20
-# characters in projects saved by Scratch; the rest is punctuation.
-LIST_ENTRY_OVERHEAD = 20 + 2 + 1 + 2 + 1 + 1 + 1
+# characters in projects saved by Scratch; the rest is punctuation: the id's quotes and colon,
+# the entry's brackets, the comma after the name, and the comma before the next entry (the name's
+# quotes and the items' brackets are counted with them).
+LIST_ENTRY_OVERHEAD = 20 + 2 + 1 + 2 + 1 + 1
 
 
 def decimals_for(step: float) -> int:

@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_scale.py [--triangles 1000000] [--materials 100]
         [--simplify-to 5000] [--obj-lines 10000000] [--skip-full] [--workdir DIR] [--quick]
-        [--parse-only] [--out FILE]
+        [--parse-only] [--out FILE] [--derive]
 
 Part 1, the pipeline. A bumpy height field of quads (``--triangles`` triangles after
 triangulation) in ``--materials`` tiles, one ``usemtl`` each, is written as OBJ + MTL. Then one
@@ -38,6 +38,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 OUT = REPO / "benchmarks" / "results" / "scale.json"
+AO_SAMPLES = 64  # the lighting stage's rays per vertex
 GB = 1024 ** 3
 
 
@@ -144,7 +145,7 @@ def stage_config(simplify_to: int | None, ao: bool = True, bsp: bool = True, bvh
     if simplify_to:
         cfg["mesh"] = {"simplify": {"enabled": True, "target_triangles": simplify_to}}
     if ao:
-        cfg["lighting"] = {"enabled": True, "ao": {"enabled": True, "samples": 64}, "ambient": [1.0, 1.0, 1.0]}
+        cfg["lighting"] = {"enabled": True, "ao": {"enabled": True, "samples": AO_SAMPLES}, "ambient": [1.0, 1.0, 1.0]}
     return cfg
 
 
@@ -161,7 +162,12 @@ def main() -> None:
     ap.add_argument("--parse-only", action="store_true",
                     help="only part 3 (the OBJ parser); keeps the other results in the output file")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--derive", action="store_true", help="only recompute the derived figures of --out")
     a = ap.parse_args()
+    if a.derive:
+        a.out.write_text(json.dumps(derive(json.loads(a.out.read_text())), indent=2) + "\n")
+        print(f"derived figures written to {a.out}")
+        return
     if a.quick:
         a.triangles, a.obj_lines = 100_000, 1_000_000
     work = a.workdir or Path(tempfile.mkdtemp(prefix="bake-scale-"))
@@ -177,7 +183,7 @@ def main() -> None:
         parse_part(a, work, doc)
         doc["obj_parse_machine"]["loadavg_1min_after"] = os.getloadavg()[0]
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(json.dumps(doc, indent=2) + "\n")
+        a.out.write_text(json.dumps(derive(doc), indent=2) + "\n")
         print(f"wrote {a.out} (obj_parse only)")
         return
 
@@ -223,8 +229,43 @@ def main() -> None:
     doc["machine"]["loadavg_1min_after"] = os.getloadavg()[0]
     doc["self_maxrss_kb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(doc, indent=2) + "\n")
+    a.out.write_text(json.dumps(derive(doc), indent=2) + "\n")
     print(f"wrote {a.out}")
+
+
+def _note(r: dict) -> str:
+    """What a stage row's table says besides seconds and memory: what came out."""
+    c, acc = r.get("counts_out") or {}, r.get("accuracy") or {}
+    st = r.get("stage", "")
+    if "error" in r:
+        return f"failed: {r['error']}"
+    if st in ("import", "transform") and c.get("polygons") and not c.get("triangles"):
+        return f"{c['polygons']:,} polygons"
+    parts = [f"{c.get('triangles', 0):,} triangles"]
+    if st == "simplify" and "hausdorff_max" in acc:
+        parts.append(f"Hausdorff max {100 * acc['hausdorff_max']:.3g}% of the diagonal (sampled)")
+    if st == "bsp" and "bsp_records" in c:
+        parts.append(f"{c['bsp_records']:,} records")
+    if st == "bvh" and "bvh_nodes" in c:
+        parts.append(f"{c['bvh_nodes']:,} nodes, {c.get('bvh_list_items', 0):,} list items")
+    if st == "lighting":
+        parts.append(f"{c.get('vertices', 0):,} vertices x {AO_SAMPLES} rays")
+    return ", ".join(parts)
+
+
+def derive(doc: dict) -> dict:
+    """The figures the docs' tables show, from the measured ones (tools/doc_tables.py formats,
+    it does not compute): peak RSS in GB, a note per stage, the parser's file size in MB."""
+    for part in ("pipeline", "full_size"):
+        for r in doc.get(part) or []:
+            if "maxrss_kb" in r:
+                r["peak_rss_gb"] = round(r["maxrss_kb"] / 1024 ** 2, 2)
+            r["note"] = _note(r)
+    for r in doc.get("obj_parse") or []:
+        if "maxrss_kb" in r:
+            r["peak_rss_gb"] = round(r["maxrss_kb"] / 1024 ** 2, 2)
+        r["file_mb"] = round(r.get("file_bytes", 0) / 1e6)
+    return doc
 
 
 def parse_part(a: argparse.Namespace, work: Path, doc: dict) -> None:

@@ -20,7 +20,8 @@ triangles, where the distance rises to a sharp ridge; a grid finds the ridge but
 So, ``rounds`` times, the ``seeds`` largest distances at least a cell apart are taken and every
 cell that has one of them as a corner is cut into four (edge midpoints, again shared exactly
 between neighbours), and the new points are measured. Each round halves the spacing where the
-distance peaks, so after 8 rounds the worst places are sampled 256 times finer than the rest.
+distance peaks, so after the stage's ``ROUNDS`` (12) the worst places are sampled 4,096 times
+finer than the rest.
 On the simplified side the cells around the places closest to the original's farthest points
 (within ``PIT_SHARE`` of the original -> simplified maximum) are cut in every round too: over a
 narrow pit of the original the simplified side's distance peaks above the pit, often between
@@ -46,8 +47,9 @@ every triangle of Y that could be closer (``SurfaceIndex.exact``), until the lar
 distance is at least every value left: the maximum reported is the exact distance at a point
 of the sample. It is a *sampled* maximum: the true maximum over the surface can only be
 larger, by at most how much the distance grows between samples; it is not called exact.
-tests/mesh/test_simplify_error.py compares it with an independent measurement (MeshLab's
-Hausdorff filter on 300,000 points, refined around its worst samples).
+tests/mesh/test_simplify_measure.py and test_simplify_targets.py compare it with an independent
+measurement (tests/mesh/simplify_reference.py: MeshLab's Hausdorff filter on 100,000 to 150,000
+points, refined around its worst samples).
 
 The mean of each direction is the area-weighted mean over the grid (each cell counts its area
 times the mean of its corners), before refinement.

@@ -1445,7 +1445,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         "error_sample": sample,
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
                         f"inside every triangle; on the simplified one {_measure_mod.POINTS_PER_SIMPLIFIED} per "
-                        "triangle where that is more, at most 4 x error_samples), refined "
+                        "triangle where that is more, at most 4 x error_samples, and then every triangle cut "
+                        f"into at least {4 ** _measure_mod.CAPPED_MIN_LEVEL} cells), refined "
                         f"{_measure_mod.ROUNDS} times around up to "
                         f"{_measure_mod.SEEDS} of the largest distances at separate places "
                         f"({4 * _measure_mod.SEEDS} on the original's side), only cells that may hold more than "

@@ -80,6 +80,10 @@ MIN_LEVEL_SIMPLIFIED = 1
 # four times as many): the bunny at 10%, 6,945 triangles, had its peak over a narrow pit 4-6% low
 # with the 20,000 points of the default; 80,000 find it
 POINTS_PER_SIMPLIFIED = 12
+# ... and where the 4x cap below bites, every triangle is cut into at least 4**CAPPED_MIN_LEVEL
+# cells (at least 15 nodes, shared; the bunny at 50%, 34,725 triangles, had 2.4 points each under
+# the cap and its maximum 6.1% low, between grid points of a triangle that never became a seed)
+CAPPED_MIN_LEVEL = 2
 # separate places where the distance peaks, kept for the stage's repairs
 PEAKS = 64
 # the original's points within this share of the a -> b maximum mark places where the simplified
@@ -500,6 +504,17 @@ def original_side(index_b: SurfaceIndex, grid_a: SurfaceGrid, *, seeds: int = SE
     return directed(index_b, grid_a, seeds=4 * seeds, rounds=rounds, straddling=straddling)
 
 
+def simplified_grid(n_triangles: int, points: int) -> tuple[int, int]:
+    """The simplified side's grid: (points, least level per triangle). ``POINTS_PER_SIMPLIFIED``
+    per triangle where that is more than ``points``, at most four times ``points``; where that cap
+    bites, every triangle at least at level ``CAPPED_MIN_LEVEL`` (the grid then grows past the cap
+    with the triangle count)."""
+    want = POINTS_PER_SIMPLIFIED * n_triangles
+    if want > 4 * points:
+        return 4 * points, max(MIN_LEVEL_SIMPLIFIED, CAPPED_MIN_LEVEL)
+    return max(points, want), MIN_LEVEL_SIMPLIFIED
+
+
 def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *, points: int = 20000,
               index_a: SurfaceIndex | None = None, grid_a: SurfaceGrid | None = None,
               index_b: SurfaceIndex | None = None, seeds: int = SEEDS, rounds: int = ROUNDS,
@@ -517,8 +532,9 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     ga = grid_a if grid_a is not None else surface_grid(Va, Fa, points)
     # the simplified side: POINTS_PER_SIMPLIFIED points per triangle (peaks over the original's
     # narrow pits hide under big triangles between coarser grid points), at most 4x ``points``
-    gb = surface_grid(Vb, Fb, max(points, min(POINTS_PER_SIMPLIFIED * len(Fb), 4 * points)),
-                      min_level=MIN_LEVEL_SIMPLIFIED)
+    # and then every triangle cut at least CAPPED_MIN_LEVEL times
+    n_b, level_b = simplified_grid(len(Fb), points)
+    gb = surface_grid(Vb, Fb, n_b, min_level=level_b)
     ab = a_to_b if a_to_b is not None else original_side(ib, ga, seeds=seeds, rounds=rounds, straddling=straddling)
     # (the simplified side's cells are cut around its seeds only, as before: its bound, to one
     # small triangle of the original, is too loose to leave many out, and costs a tenth)

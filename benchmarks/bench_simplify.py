@@ -36,7 +36,7 @@ and the default, reported and independent max. ``sweep``: the bunny at 1% with
 in the right-handed frame, with the default stage, without the peak round and without the
 refine and peak rounds: the seconds and the reported max each costs and buys (the speed goal's
 trade; these rows measure nothing independently: the reported max agreed with the independent
-one within 2% on every accuracy row, ``simplify_subset.json``).
+one within 2% on every accuracy row of ``simplify.json``).
 
 Timings on a shared machine are noisy: compare within one run (the load average is recorded).
 """

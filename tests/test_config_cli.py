@@ -207,3 +207,16 @@ def test_output_name_clash_in_a_config_names_its_line(layout):
     (layout / "cfg" / "bake.toml").write_text('[input]\npath = "m.obj"\n[export]\njson_name = "m.sb3"\n')
     line = error_line(bake(["run", "cfg/bake.toml", "--out", "o", "--quiet"], cwd=layout), 2)
     assert "bake.toml:4: key 'export.json_name'" in line, line
+
+
+def test_reserved_output_names_cover_what_the_bake_writes_beside_its_outputs():
+    """config.RESERVED_OUTPUT_NAMES repeats names other modules own (the reports, report.html's
+    live script and sweep folder, the list and asset folders, the xatlas cache): it must keep
+    every one of them, or a configured output name could take one again."""
+    from bake.export import html, output
+    from bake.export.lists import list_file_name
+    from bake.textures.lightmap import CACHE_SUBDIR
+
+    owned = set(output.REPORT_FILES) | {html.HTML_NAME, html.LIVE_NAME, html.SWEEP_DIR, CACHE_SUBDIR.parts[0],
+                                        list_file_name("verts").split("/")[0], "assets"}
+    assert owned <= set(config.RESERVED_OUTPUT_NAMES), owned - set(config.RESERVED_OUTPUT_NAMES)

@@ -106,38 +106,36 @@ def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
     return readers.BSPSpec(nodes=nodes, planes=planes)
 
 
-def _has_list(project: Path, name: str) -> bool:
+def _read_project(project: Path) -> dict | None:
+    """The project.json of a project baked into (None if it cannot be read: merge_into reports it)."""
     try:
-        proj, _ = sb3.load_project(project)
+        return sb3.load_project(project)[0]
     except InputError:
-        return False  # merge_into reports it
-    return any(isinstance(e, list) and e and e[0] == name for t in proj.get("targets", []) or []
-               if isinstance(t, dict) for e in (t.get("lists") or {}).values())
+        return None
+
+
+def _list_names(proj: dict | None, targets: Any = None) -> set[str]:
+    """Names of the lists of ``proj``'s targets (those ``targets(t)`` accepts, or all)."""
+    return {e[0] for t in (proj or {}).get("targets", []) or []
+            if isinstance(t, dict) and (targets is None or targets(t))
+            for e in (t.get("lists") or {}).values() if isinstance(e, list) and e and isinstance(e[0], str)}
 
 
 def _bake_list_names(cfg: Any) -> set[str]:
     """Lists a bake writes, whichever stages run: the mesh lists (``export.names``), the packed
-    texts, and the BSP and BVH lists (their readers' names)."""
+    texts, and the BSP and BVH lists (their readers' default names)."""
     names = {v for v in vars(cfg.names).values() if isinstance(v, str)}
-    bsp, bvh = readers.BSPSpec(), readers.BVHSpec(bary=(0.0, 1.0))
-    return names | {bsp.nodes, bsp.planes, bvh.nodes, bvh.tris, bvh.ids}
+    for spec in (readers.BSPSpec, readers.BVHSpec):  # their list-name fields
+        names |= {f.default for f in dataclasses.fields(spec) if f.name in ("nodes", "planes", "tris", "ids")}
+    return names
 
 
-def _stale_lists(project: Path, target: str, written: dict[str, list], cfg: Any) -> list[str]:
+def _stale_lists(proj: dict | None, target: str, written: dict[str, list], cfg: Any) -> list[str]:
     """Lists of an earlier bake that a project baked into keeps because this bake does not write
     them (a BSP tree of another model, colours the new model does not have): the stage's and the
     target sprite's lists with a bake's list name that is not among ``written``."""
-    try:
-        proj, _ = sb3.load_project(project)
-    except InputError:
-        return []  # merge_into reports it
-    ours = _bake_list_names(cfg) - set(written)
-    found = set()
-    for t in proj.get("targets", []) or []:
-        if isinstance(t, dict) and (t.get("isStage") or t.get("name") == target):
-            found |= {e[0] for e in (t.get("lists") or {}).values()
-                      if isinstance(e, list) and e and isinstance(e[0], str) and e[0] in ours}
-    return sorted(found)
+    seen = _list_names(proj, lambda t: t.get("isStage") or t.get("name") == target)
+    return sorted(seen & (_bake_list_names(cfg) - set(written)))
 
 
 def texture_costumes(scene: Any) -> list[sb3.Costume]:
@@ -229,6 +227,7 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         if Path(out_name).name != out_name:
             raise ConfigError("must be a file name, not a path", key="export.into_name")
         sprites = []
+        src_project = _read_project(src)
         into_spec, into_lists = spec, stored
         if packed and target != "Stage":
             # the loader would have to be in the author's sprite that owns the lists
@@ -236,7 +235,7 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                 record.warn("export.pack needs export.into_target = \"Stage\" (the loader sprite must see the "
                             f"lists): the lists baked into {src.name} are plain")
             into_spec, into_lists = plain_spec, dict(values)
-        elif not packed and packed_name not in into_lists and _has_list(src, packed_name):
+        elif not packed and packed_name not in into_lists and packed_name in _list_names(src_project):
             # an earlier packed bake's texts would overwrite these lists at the green flag: empty them
             into_lists = {**into_lists, packed_name: []}
         if not _cfg(cfg, "into_reader", False) and _has_loader(into_spec):
@@ -255,7 +254,7 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         check_packed_lists(sb3.load_project(data)[0], src)
         files[out_name] = data
         sizes = sb3.archive_sizes(data)
-        stale = _stale_lists(src, target, into_lists, cfg)
+        stale = _stale_lists(src_project, target, into_lists, cfg)
         if stale and record is not None:
             record.warn(f"export.into: {src.name} keeps list(s) an earlier bake wrote and this one does not: "
                         f"{', '.join(repr(n) for n in stale)}; they are left as they were, so blocks that read them "

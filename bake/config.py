@@ -106,9 +106,17 @@ class SimplifyConfig:
     # The symmetric Hausdorff error in the record: a grid of about error_samples points on each
     # surface (every vertex, points along every edge and inside every triangle; on the simplified
     # one 12 per triangle where that is more, at most 4 x error_samples), refined around the
-    # largest distances; a sampled maximum (the record gives the sample), never called exact.
+    # largest distances; a sampled maximum (the record gives the sample), never called exact
+    # (error_bound below proves an upper bound of the true one).
     measure_error: bool = True
     error_samples: int = 20000
+    # Then prove an upper bound of the true maximum (over the whole surfaces, not a sample): grid
+    # cells are cut until none can hold more than 2% above the largest distance found, at most
+    # 16 x error_samples more points per direction (the record says whether it got there).
+    # "original": the original -> simplified direction (cut-off features); "both": the
+    # simplified -> original one too (slower: the original is the big mesh); "none". What each
+    # costs and finds: docs/simplify.md, "A proven bound".
+    error_bound: Literal["none", "original", "both"] = "original"
     seed: int = 0
 
 

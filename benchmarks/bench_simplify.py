@@ -250,6 +250,14 @@ def row_for(scene, out, rec, seconds: float, lib_s: float, model: str, ratio, or
         if ref["a_to_b"] > 0 else None,
         "b_to_a_over_reference": acc.get("hausdorff_max_simplified_to_original") / ref["b_to_a"]
         if ref["b_to_a"] > 0 else None,
+        # the proven upper bound of the original -> simplified max (error_bound), against the
+        # independent max: it must never be below it
+        "bound_a_to_b": acc.get("hausdorff_bound_original_to_simplified"),
+        "bound_a_to_b_over_reference": acc["hausdorff_bound_original_to_simplified"] / ref["a_to_b"]
+        if acc.get("hausdorff_bound_original_to_simplified") is not None and ref["a_to_b"] > 0 else None,
+        "bound_a_to_b_within_share": ((det.get("error_bound") or {}).get("original_to_simplified") or {}).get(
+            "within_share"),
+        "bound_seconds": (det.get("error_bound") or {}).get("seconds"),
         "stage_seconds": round(seconds, 3), "library_seconds": round(lib_s, 5),
         "stage_over_library": round(seconds / lib_s, 1) if lib_s > 0 else None,
         "phase_seconds": {k[:-8]: det.get(k) for k in ("prepare_seconds", "library_seconds", "fit_seconds",
@@ -445,6 +453,14 @@ def summarise(rows: list[dict]) -> dict:
         s["rows"] = len(rows)
         s["folds_independent_total"] = int(sum(r["folds_independent"] for r in rows))
         s["folds_record_matches_independent"] = all(r["folds"] == r["folds_independent"] for r in rows)
+        bounded = [r for r in rows if r.get("bound_a_to_b_over_reference") is not None]
+        if bounded:
+            s["bound_a_to_b"] = {
+                "rows": len(bounded),
+                "never_below_independent": all(r["bound_a_to_b_over_reference"] >= 1 - 1e-9 for r in bounded),
+                "within_2_percent_of_reported": sum(bool(r["bound_a_to_b_within_share"]) for r in bounded),
+                "largest_over_independent": max(r["bound_a_to_b_over_reference"] for r in bounded),
+                "largest_seconds": max(r["bound_seconds"] or 0.0 for r in bounded)}
     for ratio, limit in ((0.01, 0.010), (0.1, 0.0020)):
         sel = [r for r in rows if r["model"] == "bunny" and r["ratio"] == ratio]
         if sel:

@@ -30,9 +30,11 @@ grid points whose distances are lower than elsewhere, where the largest-distance
 
 A cell is cut only if it may hold a distance above ``KEEP_SHARE`` (80%) of the largest distance
 made exact so far. The bound is proven: the distance to one triangle is convex, so over a cell
-it is at most its largest value at the cell's corners, and the distance to Y is at most the
-distance to any one of its triangles; a cell's bound is the smallest, over the triangles of Y
-closest to its corners, of the largest corner distance to that triangle. Cells left uncut hold
+it is at most the linear interpolation of its values at the cell's corners, and the distance to
+Y is at most the distance to any one of its triangles; a cell's bound is the largest value, over
+the cell, of the smallest of those interpolations for the three triangles of Y closest to its
+corners (a small linear programme, :func:`envelope_bound`; with one triangle it is the largest
+corner distance, the bound this measure used before, which is never lower). Cells left uncut hold
 no point above 80% of the reported maximum, so what the stage's repairs and peak rounds look
 at (distances within 80% of the maximum) is sampled as densely as before; the cut cells are
 fewer (the bunny to 2,000 triangles: 40,243 new points instead of 104,099 on the original's
@@ -53,6 +55,17 @@ points, refined around its worst samples).
 
 The mean of each direction is the area-weighted mean over the grid (each cell counts its area
 times the mean of its corners), before refinement.
+
+A proven bound
+--------------
+:func:`certify` goes on from a measure: every cell whose bound is above ``share`` times the
+largest exact distance found is cut, largest bound first, and the new points are measured, until
+no such cell is left or a budget of points is spent. The largest bound of any cell is then an
+upper bound of the distance at *every* point of X (up to floating-point rounding), not a sample
+(``Directed.bound``); where it finished, the sampled maximum is within ``share`` of the true
+one. Cutting where the bound is high also finds the peaks the seeds missed (the CSG model at 2%:
+a peak near the tip of a sliver, 7.6% above the sampled maximum). The stage does this on its
+final result (``error_bound``).
 """
 
 from __future__ import annotations
@@ -64,7 +77,8 @@ from scipy.spatial import cKDTree
 
 from .simplify_error import SurfaceIndex, _pair_dist2, _verify
 
-__all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "original_side", "hausdorff"]
+__all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "original_side", "hausdorff",
+           "certify", "bound_hausdorff", "envelope_bound"]
 
 # finest grid level per triangle: at most 2**_MAX_LEVEL parts per edge before refinement
 _MAX_LEVEL = 6
@@ -96,6 +110,9 @@ PIT_PLACES = 16  # at most this many such places (the largest, a grid cell apart
 KEEP_SHARE = 0.8
 # points made exact per round for that bound
 _LB_POINTS = 64
+# the certification (certify()): cells cut per round, at most this many rounds
+_CERT_BATCH = 16384
+_CERT_ROUNDS = 64
 
 
 @dataclass
@@ -272,6 +289,10 @@ class Directed:
     all_dists: np.ndarray | None = None
     all_tris: np.ndarray | None = None
     all_nearest: np.ndarray | None = None
+    # a proven upper bound of the distance at any point of X (nan: not proven; see certify())
+    bound: float = float("nan")
+    certification: dict | None = None  # what proving it took: cells cut, points added, rounds
+    state: dict | None = field(default=None, repr=False)  # the cells and points, to go on from
 
 
 def _distinct_top(P: np.ndarray, d: np.ndarray, k: int, apart: float) -> np.ndarray:
@@ -312,9 +333,159 @@ def _append(st: dict, name: str, add: np.ndarray) -> None:
     st[name] = buf[:n + k]
 
 
+def envelope_bound(D: np.ndarray) -> np.ndarray:
+    """The largest value over a triangle (cell) of the lower envelope of three affine functions,
+    given at its corners: ``D[c, i, j]`` is function ``j`` at corner ``i`` of cell ``c``
+    (``(s, 3, 3)``). Returns ``(s,)``: ``max over the cell of min_j L_j``, where ``L_j`` is the
+    linear interpolation of ``D[c, :, j]``. This is a small linear programme (maximise ``z`` with
+    ``z <= L_j`` on the triangle); its optimum lies at a vertex of the arrangement, so it is the
+    largest of the envelope's values at the corners, where two functions cross on an edge, and
+    where all three meet inside (tests/mesh/test_simplify_bound.py checks it against an LP
+    solver)."""
+    D = np.asarray(D, np.float64)
+    s = len(D)
+    best = D.min(axis=2).max(axis=1)  # the corners
+    for j, k in ((0, 1), (0, 2), (1, 2)):
+        g = D[:, :, j] - D[:, :, k]
+        for i1, i2 in ((0, 1), (1, 2), (2, 0)):
+            a, b = g[:, i1], g[:, i2]
+            ok = a * b < 0  # the two functions cross inside this edge
+            t = np.where(ok, a / np.where(ok, a - b, 1.0), 0.0)
+            val = ((1.0 - t)[:, None] * D[:, i1, :] + t[:, None] * D[:, i2, :]).min(axis=1)
+            best = np.where(ok, np.maximum(best, val), best)
+    # all three equal inside: lambda . (D[:, 1] - D[:, 0]) = lambda . (D[:, 2] - D[:, 0]) = 0,
+    # sum(lambda) = 1
+    M = np.stack([D[:, :, 1] - D[:, :, 0], D[:, :, 2] - D[:, :, 0], np.ones((s, 3))], axis=1)
+    det = np.linalg.det(M) if s else np.zeros(0)
+    okd = np.abs(det) > 1e-300
+    lam = np.zeros((s, 3))
+    if okd.any():
+        rhs = np.zeros((int(okd.sum()), 3, 1))
+        rhs[:, 2] = 1.0
+        lam[okd] = np.linalg.solve(M[okd], rhs)[..., 0]
+    ok = okd & (lam >= 0).all(axis=1)
+    val = np.einsum("si,sij->sj", lam, D).min(axis=1)
+    return np.where(ok, np.maximum(best, val), best)
+
+
+def _split(st: dict, index_y: SurfaceIndex, sel: np.ndarray) -> np.ndarray:
+    """Cut the cells ``sel`` into four (midpoints shared with neighbours cut before); the four
+    children of each go to the end of ``st["cells"]`` (corner a's, b's, c's, then the middle
+    ones, each block in ``sel``'s order). Returns the ids of the new points."""
+    cells, ctri, allP = st["cells"], st["ctri"], st["P"]
+    n_pts = len(allP)
+    c = cells[sel]
+    a, b = np.concatenate([c[:, 0], c[:, 1], c[:, 2]]), np.concatenate([c[:, 1], c[:, 2], c[:, 0]])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    uk, inv = np.unique(lo * (1 << 31) + hi, return_inverse=True)
+    mk, mi = st["mid_keys"], st["mid_ids"]
+    pos = np.searchsorted(mk, uk)
+    have = (pos < len(mk)) & (mk[np.minimum(pos, max(len(mk) - 1, 0))] == uk) if len(mk) else \
+        np.zeros(len(uk), bool)
+    ids = np.empty(len(uk), np.int64)
+    ids[have] = mi[pos[have]]
+    new = np.flatnonzero(~have)
+    ids[new] = n_pts + np.arange(len(new))
+    ulo, uhi = uk[new] >> 31, uk[new] & ((1 << 31) - 1)
+    Pn = 0.5 * (allP[ulo] + allP[uhi])
+    tn = np.empty(len(uk), np.int64)  # the triangle of X a midpoint lies in
+    tn[inv] = np.tile(ctri[sel], 3)
+    dn, nn = index_y.distance(Pn)
+    for name, add in (("P", Pn), ("D", dn), ("T", tn[new]), ("N", nn)):
+        _append(st, name, add)
+    # both key lists are sorted and share no key: merge them
+    at = np.searchsorted(mk, uk[new])
+    st["mid_keys"] = np.insert(mk, at, uk[new])
+    st["mid_ids"] = np.insert(mi, at, ids[new])
+    m = ids[inv].reshape(3, -1)  # midpoints of sides ab, bc, ca of each selected cell
+    A, B, Cc = c[:, 0], c[:, 1], c[:, 2]
+    kids = np.concatenate([np.stack([A, m[0], m[2]], 1), np.stack([m[0], B, m[1]], 1),
+                           np.stack([m[2], m[1], Cc], 1), np.stack([m[0], m[1], m[2]], 1)])
+    keep = np.ones(len(cells), bool)
+    keep[sel] = False
+    st["cells"] = np.concatenate([cells[keep], kids])
+    st["ctri"] = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
+    if st.get("bound") is not None:  # the certification's bounds follow the cells
+        st["bound"] = np.concatenate([st["bound"][keep], np.full(len(kids), np.nan)])
+    return n_pts + np.arange(len(new))
+
+
+def _cell_bounds(st: dict, index_y: SurfaceIndex, sel: np.ndarray) -> np.ndarray:
+    """A proven upper bound of the distance to Y over each cell ``sel``. The distance to one
+    triangle of Y is convex, so over a cell it is at most the linear interpolation of its values
+    at the cell's corners, and the distance to Y is at most the smallest of those for the
+    triangles closest to the three corners: the bound is the largest value of that lower
+    envelope over the cell (:func:`envelope_bound`; exact point-triangle distances at the
+    corners). Cells with a corner that found no triangle get infinity."""
+    if len(sel) == 0:
+        return np.zeros(0)
+    c = st["cells"][sel]
+    near_c = st["N"][c]
+    allP = st["P"]
+    bound = np.empty(len(sel))
+    # one closest triangle for all three corners: the largest corner distance to it
+    one = (near_c[:, 0] == near_c[:, 1]) & (near_c[:, 1] == near_c[:, 2])
+    if one.any():
+        cu = c[one].ravel()
+        d2 = _pair_dist2(allP[cu], np.take(index_y.table, np.maximum(near_c[one].ravel(), 0), axis=1))
+        bound[one] = np.sqrt(d2.reshape(-1, 3).max(axis=1))
+    many = np.flatnonzero(~one)
+    if len(many):
+        c, nc = c[many], near_c[many]
+        # the nine (corner, closest triangle of a corner) pairs of each cell; neighbouring cells
+        # share most of them, so each distinct pair is measured once
+        nT = np.int64(len(index_y.F))
+        pt = np.repeat(c, 3, axis=1)  # (s, 9): column 3 i + j pairs corner i ...
+        tr = np.maximum(np.tile(nc, (1, 3)), 0)  # ... with the closest triangle of corner j
+        uk, inv = np.unique(pt.ravel() * nT + tr.ravel(), return_inverse=True)
+        d2 = _pair_dist2(allP[uk // nT], np.take(index_y.table, uk % nT, axis=1))
+        bound[many] = envelope_bound(np.sqrt(d2[inv.reshape(-1)].reshape(-1, 3, 3)))
+    bound[(near_c < 0).any(axis=1)] = np.inf
+    return bound
+
+
+def _raise_lb(st: dict, index_y: SurfaceIndex, ids: np.ndarray) -> None:
+    """Make the largest distances among the points ``ids`` exact (a few, in place) and raise
+    ``st["lb"]``, the largest distance made exact so far (a lower bound of the maximum)."""
+    D = st["D"]
+    ids = ids[D[ids] > st["lb"]]
+    if len(ids) == 0:
+        return
+    if len(ids) > _LB_POINTS:
+        ids = ids[np.argpartition(-D[ids], _LB_POINTS - 1)[:_LB_POINTS]]
+    D[ids], _ = index_y.exact(st["P"][ids], D[ids])
+    st["lb"] = max(st["lb"], float(D[ids].max()))
+
+
+def _certify(st: dict, index_y: SurfaceIndex, share: float, budget: int) -> None:
+    """Cut, largest bound first, every cell whose proven bound (:func:`_cell_bounds`) is above
+    ``share`` times the largest exact distance found, until none is left or ``budget`` new points
+    are spent; ``st["bound"]`` then bounds every cell, and its maximum the true maximum over X."""
+    if st.get("bound") is None:
+        st["bound"] = np.full(len(st["cells"]), np.nan)
+    cert = st.setdefault("cert", {"cells_cut": 0, "points": 0, "rounds": 0})
+    _raise_lb(st, index_y, np.arange(len(st["P"])))
+    for _ in range(_CERT_ROUNDS):
+        todo = np.flatnonzero(np.isnan(st["bound"]))
+        st["bound"][todo] = _cell_bounds(st, index_y, todo)
+        b = st["bound"]
+        open_ = np.flatnonzero(b > share * st["lb"])
+        if len(open_) == 0 or cert["points"] >= budget:
+            break
+        take = np.sort(open_[np.argsort(-b[open_], kind="stable")[:_CERT_BATCH]])
+        new = _split(st, index_y, take)
+        cert["cells_cut"] += len(take)
+        cert["points"] += len(new)
+        cert["rounds"] += 1
+        _raise_lb(st, index_y, new)
+    todo = np.flatnonzero(np.isnan(st["bound"]))
+    st["bound"][todo] = _cell_bounds(st, index_y, todo)
+
+
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
              verify: bool = True, straddling: bool = False, prune: bool = True,
-             extra: tuple[np.ndarray, np.ndarray] | None = None) -> Directed:
+             extra: tuple[np.ndarray, np.ndarray] | None = None, bound_share: float = 0.0,
+             bound_points: int = 0) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring. With ``straddling``, every cell whose corners are closest to different
     triangles of Y is cut once before the refinement (the distance to one triangle is convex
@@ -325,99 +496,34 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
 
     ``extra``: (points on X, their triangles of X) where a peak is suspected; in every round the
     cells around them are cut too, whatever their distances (:func:`hausdorff` passes the
-    places on the simplified surface closest to the original's farthest points)."""
+    places on the simplified surface closest to the original's farthest points).
+
+    ``bound_share`` > 0: then prove an upper bound of the maximum (:func:`certify`)."""
     P = grid.P
     if len(P) == 0 or len(index_y.F) == 0:
         inf = 0.0 if len(P) == 0 else float("inf")
-        return Directed(inf, inf, np.zeros(3), -1, len(P), 0, True)
+        return Directed(inf, inf, np.zeros(3), -1, len(P), 0, True, bound=inf)
     d, near = index_y.distance(P)
     # area-weighted mean over the grid's cells
     w = grid.cell_area
     mean = float((w * d[grid.cells].mean(axis=1)).sum() / w.sum()) if w.sum() > 0 else float(d.mean())
     st = {"cells": grid.cells, "ctri": grid.cell_tri, "P": P, "D": d, "T": grid.tri, "N": near,
-          "mid_keys": np.zeros(0, np.int64), "mid_ids": np.zeros(0, np.int64)}
-
-    def split(sel: np.ndarray) -> np.ndarray:
-        """Cut the cells ``sel`` into four (midpoints shared with neighbours cut before);
-        returns the ids of the new points."""
-        cells, ctri, allP = st["cells"], st["ctri"], st["P"]
-        n_pts = len(allP)
-        c = cells[sel]
-        a, b = np.concatenate([c[:, 0], c[:, 1], c[:, 2]]), np.concatenate([c[:, 1], c[:, 2], c[:, 0]])
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        uk, inv = np.unique(lo * (1 << 31) + hi, return_inverse=True)
-        mk, mi = st["mid_keys"], st["mid_ids"]
-        pos = np.searchsorted(mk, uk)
-        have = (pos < len(mk)) & (mk[np.minimum(pos, max(len(mk) - 1, 0))] == uk) if len(mk) else \
-            np.zeros(len(uk), bool)
-        ids = np.empty(len(uk), np.int64)
-        ids[have] = mi[pos[have]]
-        new = np.flatnonzero(~have)
-        ids[new] = n_pts + np.arange(len(new))
-        ulo, uhi = uk[new] >> 31, uk[new] & ((1 << 31) - 1)
-        Pn = 0.5 * (allP[ulo] + allP[uhi])
-        tn = np.empty(len(uk), np.int64)  # the triangle of X a midpoint lies in
-        tn[inv] = np.tile(ctri[sel], 3)
-        dn, nn = index_y.distance(Pn)
-        for name, add in (("P", Pn), ("D", dn), ("T", tn[new]), ("N", nn)):
-            _append(st, name, add)
-        # both key lists are sorted and share no key: merge them
-        at = np.searchsorted(mk, uk[new])
-        st["mid_keys"] = np.insert(mk, at, uk[new])
-        st["mid_ids"] = np.insert(mi, at, ids[new])
-        m = ids[inv].reshape(3, -1)  # midpoints of sides ab, bc, ca of each selected cell
-        A, B, Cc = c[:, 0], c[:, 1], c[:, 2]
-        kids = np.concatenate([np.stack([A, m[0], m[2]], 1), np.stack([m[0], B, m[1]], 1),
-                               np.stack([m[2], m[1], Cc], 1), np.stack([m[0], m[1], m[2]], 1)])
-        keep = np.ones(len(cells), bool)
-        keep[sel] = False
-        st["cells"] = np.concatenate([cells[keep], kids])
-        st["ctri"] = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
-        return n_pts + np.arange(len(new))
+          "mid_keys": np.zeros(0, np.int64), "mid_ids": np.zeros(0, np.int64), "lb": 0.0, "bound": None,
+          "grid": grid, "near": near, "mean": mean, "verify": verify, "index": index_y}
 
     def can_rise(sel: np.ndarray) -> np.ndarray:
         """The cells ``sel`` that may hold a distance above KEEP_SHARE of the largest distance
-        made exact so far. The distance to one triangle is convex, so over a cell it is at most its
-        largest value at the cell's corners; the distance to Y is at most that to any one
-        triangle: a cell is bounded by min over its corners' closest triangles T of max over
-        its corners of the distance to T (exact point-triangle distances)."""
+        made exact so far (:func:`_cell_bounds`; the distances are upper bounds, some far above
+        the truth: the share is taken of the largest made exact, a lower bound of the maximum)."""
         if len(sel) == 0 or not prune:
             return sel
-        c = st["cells"][sel]
-        near_c = st["N"][c]
-        allP = st["P"]
-        # the nine (corner, closest triangle of a corner) pairs of each cell; neighbouring cells
-        # share most of them, so each distinct pair is measured once
-        nT = np.int64(len(index_y.F))
-        pt = np.repeat(c, 3, axis=1)  # (s, 9): column 3 i + j pairs corner i ...
-        tr = np.maximum(np.tile(near_c, (1, 3)), 0)  # ... with the closest triangle of corner j
-        uk, inv = np.unique(pt.ravel() * nT + tr.ravel(), return_inverse=True)
-        d2 = _pair_dist2(allP[uk // nT], np.take(index_y.table, uk % nT, axis=1))
-        m = d2[inv.reshape(-1)].reshape(-1, 3, 3).max(axis=1)  # (s, 3): the largest over the corners
-        m[near_c < 0] = np.inf
-        bound = m.min(axis=1)
-        # the distances are upper bounds (some far above the truth): the share is taken of
-        # the largest distance made exact so far, a lower bound of the maximum
-        return sel[np.sqrt(bound) > KEEP_SHARE * st["lb"]]
+        return sel[_cell_bounds(st, index_y, sel) > KEEP_SHARE * st["lb"]]
 
-    def raise_lb(ids: np.ndarray) -> None:
-        """Make the largest bounds among the points ``ids`` exact (a few, in place) and raise
-        the lower bound of the maximum with them."""
-        D = st["D"]
-        ids = ids[D[ids] > st["lb"]]
-        if len(ids) == 0:
-            return
-        if len(ids) > _LB_POINTS:
-            ids = ids[np.argpartition(-D[ids], _LB_POINTS - 1)[:_LB_POINTS]]
-        D[ids], _ = index_y.exact(st["P"][ids], D[ids])
-        st["lb"] = max(st["lb"], float(D[ids].max()))
-
-    st["lb"] = 0.0
     if prune:
-        raise_lb(np.arange(len(P)))
+        _raise_lb(st, index_y, np.arange(len(P)))
     if straddling:
         N = st["N"][st["cells"]]
-        split(can_rise(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2]))))
+        _split(st, index_y, can_rise(np.flatnonzero((N[:, 0] != N[:, 1]) | (N[:, 1] != N[:, 2]))))
     apart = grid.spacing
     pool = np.arange(len(st["P"]))  # where the next seeds are looked for: the last seeds and new points
     for r in range(rounds):
@@ -436,12 +542,36 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         sel = can_rise(np.flatnonzero(hot[cells[:, 0]] | hot[cells[:, 1]] | hot[cells[:, 2]]))
         if len(sel) == 0:
             break
-        pool = np.concatenate([top, split(sel)])
+        pool = np.concatenate([top, _split(st, index_y, sel)])
         if prune:
-            raise_lb(pool)
+            _raise_lb(st, index_y, pool)
+    if bound_share > 0:
+        _certify(st, index_y, bound_share, bound_points)
+    return _result(st, index_y)
+
+
+def certify(d: Directed, share: float, points: int) -> Directed:
+    """``d`` with a proven upper bound of its maximum: every
+    cell whose bound (:func:`_cell_bounds`) is above ``share`` times the largest exact distance
+    found is cut, largest bound first, until none is left or ``points`` new points are spent.
+    ``Directed.bound`` is then the largest bound of any cell: the distance to Y at any point of X
+    is at most that (up to floating-point rounding); ``bound <= share * max`` when it finished."""
+    if d.state is None:
+        return d
+    # a copy that shares no buffer with ``d`` (its distances are made exact in place)
+    st = {k: v for k, v in d.state.items() if not k.startswith("_")}
+    st["D"] = st["D"].copy()
+    if st.get("bound") is not None:
+        st["bound"] = st["bound"].copy()
+    _certify(st, st["index"], share, points)
+    return _result(st, st["index"])
+
+
+def _result(st: dict, index_y: SurfaceIndex) -> Directed:
+    grid, near = st["grid"], st["near"]
     allP, D, allT, allN = st["P"], st["D"].copy(), st["T"], st["N"]
     n_pts = len(allP)
-    if verify:
+    if st["verify"]:
         tops, exact = _verify(allP, D, index_y)
     else:  # upper bounds (the repairs compare before and after with the same index)
         tops, exact = np.argsort(-D, kind="stable")[:1], False
@@ -449,11 +579,17 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     pk = _distinct_top(allP, D, PEAKS, 0.5 * grid.spacing)
     tri_max = np.zeros(int(grid.cell_tri.max()) + 1 if len(grid.cell_tri) else 0)
     np.maximum.at(tri_max, allT, D)
-    return Directed(max=float(D[i]), mean=mean, worst=allP[i].copy(), worst_tri=int(allT[i]),
-                    grid_points=len(P), refine_points=n_pts - len(P), exact=bool(exact),
-                    top_points=allP[tops], top_dists=D[tops], top_tris=allT[tops], nearest=near[:len(P)],
+    bound, cert = float("nan"), None
+    if st.get("bound") is not None:
+        # the sampled max is exact at its point (below every bound), or an upper bound itself
+        bound = max(float(st["bound"].max()) if len(st["bound"]) else 0.0, float(D[i]) if not exact else 0.0)
+        cert = dict(st.get("cert", {}))
+    return Directed(max=float(D[i]), mean=st["mean"], worst=allP[i].copy(), worst_tri=int(allT[i]),
+                    grid_points=len(grid.P), refine_points=n_pts - len(grid.P), exact=bool(exact),
+                    top_points=allP[tops], top_dists=D[tops], top_tris=allT[tops], nearest=near,
                     spacing=grid.spacing, peak_points=allP[pk], peak_dists=D[pk], peak_tris=allT[pk],
-                    tri_max=tri_max, all_points=allP, all_dists=D, all_tris=allT, all_nearest=allN)
+                    tri_max=tri_max, all_points=allP, all_dists=D, all_tris=allT, all_nearest=allN,
+                    bound=bound, certification=cert, state=st)
 
 
 def _pit_places(ab: Directed, index_b: SurfaceIndex) -> tuple[np.ndarray, np.ndarray] | None:
@@ -485,6 +621,14 @@ class HausdorffResult:
     a_to_b: Directed | None = None
     b_to_a: Directed | None = None
     exact: bool = True  # both maxima are exact distances at their points (see Directed.exact)
+
+    @property
+    def bound(self) -> float:
+        """A proven upper bound of the symmetric maximum (nan where a direction has none)."""
+        if self.a_to_b is None or self.b_to_a is None:
+            return float("nan")
+        b = (self.a_to_b.bound, self.b_to_a.bound)
+        return float("nan") if any(np.isnan(x) for x in b) else max(b)
 
     @property
     def top_points(self) -> np.ndarray:
@@ -543,8 +687,20 @@ def hausdorff(Va: np.ndarray, Fa: np.ndarray, Vb: np.ndarray, Fb: np.ndarray, *,
     # it lies above the pit, where the original's farthest points are closest to the simplified
     # surface, so the refinement also cuts around those places
     ba = directed(ia, gb, seeds=seeds, rounds=rounds, prune=False, extra=_pit_places(ab, ib))
+    return _symmetric(ab, ba)
+
+
+def _symmetric(ab: Directed, ba: Directed) -> HausdorffResult:
     worst = ab.worst if ab.max >= ba.max else ba.worst
     return HausdorffResult(max=max(ab.max, ba.max), mean=0.5 * (ab.mean + ba.mean), max_a_to_b=ab.max,
                            max_b_to_a=ba.max, mean_a_to_b=ab.mean, mean_b_to_a=ba.mean, worst_point=worst,
                            points=ab.grid_points + ba.grid_points, refine_points=ab.refine_points + ba.refine_points,
                            a_to_b=ab, b_to_a=ba, exact=ab.exact and ba.exact)
+
+
+def bound_hausdorff(h: HausdorffResult, share: float, points: int) -> HausdorffResult:
+    """``h`` with a proven upper bound of each direction's maximum (:func:`certify`, at most
+    ``points`` new points per direction)."""
+    if h.a_to_b is None or h.b_to_a is None:
+        return h
+    return _symmetric(certify(h.a_to_b, share, points), certify(h.b_to_a, share, points))

@@ -111,8 +111,9 @@ class SimplifyConfig:
     measure_error: bool = True
     error_samples: int = 20000
     # Then prove an upper bound of the true maximum (over the whole surfaces, not a sample): grid
-    # cells are cut until none can hold more than 2% above the largest distance found, at most
-    # 16 x error_samples more points per direction (the record says whether it got there).
+    # cells are cut until none can hold more than 2% above the largest distance found (or 0.01%
+    # of the diagonal), at most 16 x error_samples more points per direction (the record says
+    # whether it got there).
     # "original": the original -> simplified direction (cut-off features); "both": the
     # simplified -> original one too (slower: the original is the big mesh); "none". What each
     # costs and finds: docs/simplify.md, "A proven bound".

@@ -257,6 +257,8 @@ def row_for(scene, out, rec, seconds: float, lib_s: float, model: str, ratio, or
         if acc.get("hausdorff_bound_original_to_simplified") is not None and ref["a_to_b"] > 0 else None,
         "bound_a_to_b_within_share": ((det.get("error_bound") or {}).get("original_to_simplified") or {}).get(
             "within_share"),
+        "bound_a_to_b_finished": ((det.get("error_bound") or {}).get("original_to_simplified") or {}).get(
+            "finished"),
         "bound_seconds": (det.get("error_bound") or {}).get("seconds"),
         "stage_seconds": round(seconds, 3), "library_seconds": round(lib_s, 5),
         "stage_over_library": round(seconds / lib_s, 1) if lib_s > 0 else None,

@@ -96,7 +96,7 @@ from .simplify_error import (FlipResult, SurfaceIndex, bounding_spheres, edge_co
                              triangle_pattern)
 from .simplify_fit import refit
 from . import simplify_measure as _measure_mod
-from .simplify_measure import HausdorffResult, certify, directed, hausdorff, original_side, surface_grid
+from .simplify_measure import HausdorffResult, bound_hausdorff, directed, hausdorff, original_side, surface_grid
 
 __all__ = ["stage", "simplify_mesh", "resolve_target", "METHODS"]
 
@@ -126,8 +126,11 @@ _FIT_TOLERANCE = 1.25
 # Face colours with more distinct values than this are a colour signal, not flat regions.
 MAX_COLOR_REGIONS = 1024
 # the proven bound (error_bound): cells are cut until none can hold more than this many times the
-# largest distance found, with at most _BOUND_POINTS x error_samples new points per direction
+# largest distance found, nor more than BOUND_FLOOR of the diagonal (a twentieth of a pixel on a
+# model 400 pixels across: where the error is about zero, e.g. flat results on their input), with
+# at most _BOUND_POINTS x error_samples new points per direction
 BOUND_SHARE = 1.02
+BOUND_FLOOR = 1e-4
 _BOUND_POINTS = 16
 
 
@@ -625,7 +628,7 @@ def _fit(ctx: _Ctx, out: _Out) -> _Out:
     triangle (corners of any it turns are put back). Whether the fit is kept is decided by the
     caller, on the measured error."""
     cfg = ctx.cfg
-    if cfg.fit_iterations <= 0 or len(out.F) == 0:
+    if cfg.fit_iterations <= 0 or len(out.F) == 0 or out.fixed.all():  # (the input itself: nothing moves)
         return out
     V, F, fr, fixed = out.V, out.F, out.flip, out.fixed
     info = dict(out.fit_info)
@@ -707,7 +710,8 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
     maximum is lower."""
     log: list[dict] = []
     cfg = ctx.cfg
-    if cfg.refine_rounds <= 0 or len(out.F) == 0 or h.a_to_b is None or h.a_to_b.all_points is None:
+    if cfg.refine_rounds <= 0 or len(out.F) == 0 or h.a_to_b is None or h.a_to_b.all_points is None \
+            or out.flip is None:  # (the input itself, backed off to: left as it is)
         return out, h, log
     t = time.perf_counter()
     V, F = out.V.copy(), out.F.copy()
@@ -811,22 +815,24 @@ def _refine(ctx: _Ctx, out: _Out, h: HausdorffResult) -> tuple[_Out, HausdorffRe
     return replace(out, repair_seconds=out.repair_seconds + repair_s), h, log
 
 
-def _prove_bound(ctx: _Ctx, h: HausdorffResult) -> tuple[HausdorffResult, dict]:
+def _prove_bound(ctx: _Ctx, h: HausdorffResult) -> tuple[HausdorffResult, dict | None]:
     """The result's measure with a proven upper bound of its maximum, per direction that
     ``error_bound`` asks for (simplify_measure.certify: cells cut, largest bound first, until none
-    can hold more than BOUND_SHARE times the largest distance found, or the points run out)."""
-    if h.a_to_b is None or h.b_to_a is None:
-        return h, {}
+    can hold more than BOUND_SHARE times the largest distance found or BOUND_FLOOR of the
+    diagonal, or the points run out)."""
+    if h.a_to_b is None or h.b_to_a is None:  # (the input itself, backed off to: nothing measured)
+        return h, None
     t = time.perf_counter()
     points = _BOUND_POINTS * ctx.cfg.error_samples
-    ab = certify(h.a_to_b, BOUND_SHARE, points)
-    ba = certify(h.b_to_a, BOUND_SHARE, points) if ctx.cfg.error_bound == "both" else h.b_to_a
-    h2 = _measure_mod._symmetric(ab, ba)
-    log: dict = {"share": BOUND_SHARE, "points_per_direction": points}
-    for name, d, before in (("original_to_simplified", ab, h.a_to_b), ("simplified_to_original", ba, h.b_to_a)):
+    floor = BOUND_FLOOR * ctx.scale
+    h2 = bound_hausdorff(h, BOUND_SHARE, points, floor, both=ctx.cfg.error_bound == "both")
+    log: dict = {"share": BOUND_SHARE, "floor": BOUND_FLOOR, "points_per_direction": points}
+    for name, d, before in (("original_to_simplified", h2.a_to_b, h.a_to_b),
+                            ("simplified_to_original", h2.b_to_a, h.b_to_a)):
         if d.certification is None:
             continue
-        log[name] = {"bound": float(d.bound / ctx.scale), "within_share": bool(d.bound <= BOUND_SHARE * d.max),
+        log[name] = {"bound": float(d.bound / ctx.scale), "finished": d.certification["open_cells"] == 0,
+                     "within_share": bool(d.bound <= BOUND_SHARE * d.max),
                      "max_before": float(before.max / ctx.scale), "max_after": float(d.max / ctx.scale),
                      **d.certification}
     ctx.measure_seconds += time.perf_counter() - t
@@ -1378,7 +1384,14 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             out, h, refine_log = _refine(ctx, out, h)
     bound_log = None
     if h is not None and cfg.error_bound != "none":
+        before = h.max
         h, bound_log = _prove_bound(ctx, h)
+        # the bound's cuts can find a larger distance than the measure that accepted the result
+        limit = cap if kind == "triangles" else value * scale
+        if h.max > before and limit > 0 and h.max > limit:
+            what = f"error_ceiling = {cfg.error_ceiling}" if kind == "triangles" else f"max_error = {value}"
+            rec.warn(f"proving the error bound found a larger error, {h.max / scale:.4%} of the diagonal, than "
+                     f"the measure that accepted this result ({before / scale:.4%}); it is above {what}")
     notes.extend(out.notes)
     attrs = _attributes(prep, out, index_a, notes)
 
@@ -1466,10 +1479,10 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                   "refinement_points": int(h.refine_points),
                   "original_spacing": float(h.a_to_b.spacing / scale), "simplified_spacing": float(h.b_to_a.spacing / scale),
                   "max_is": ("sampled: the largest exact distance at a point of the sample (the true maximum "
-                             "over the surfaces can only be larger" if h.exact else
-                             "an upper bound of the largest distance at a point of the sample (") +
-                  ("; accuracy.hausdorff_bound_* are proven upper bounds of it, error_bound says how they "
-                   "were made)" if np.isfinite(h.a_to_b.bound) else ")")}
+                             "over the surfaces can only be larger)" if h.exact else
+                             "an upper bound of the largest distance at a point of the sample") +
+                  ("; accuracy.hausdorff_bound_* are proven upper bounds of the true maximum (details."
+                   "error_bound says how they were made)" if np.isfinite(h.a_to_b.bound) else "")}
     details.update({
         "target_triangles": int(target),
         "library_seconds": round(out.lib_seconds, 6),

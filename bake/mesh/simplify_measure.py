@@ -405,7 +405,10 @@ def _split(st: dict, index_y: SurfaceIndex, sel: np.ndarray) -> np.ndarray:
     keep[sel] = False
     st["cells"] = np.concatenate([cells[keep], kids])
     st["ctri"] = np.concatenate([ctri[keep], np.tile(ctri[sel], 4)])
-    if st.get("bound") is not None:  # the certification's bounds follow the cells
+    if st.get("bound") is not None:
+        # the certification's bounds follow the cells; a child's bound is at most its parent's
+        # (the parent's bound holds over all of it), kept as a cap on what it computes
+        st["cap"] = np.concatenate([st["cap"][keep], np.tile(st["bound"][sel], 4)])
         st["bound"] = np.concatenate([st["bound"][keep], np.full(len(kids), np.nan)])
     return n_pts + np.arange(len(new))
 
@@ -457,35 +460,38 @@ def _raise_lb(st: dict, index_y: SurfaceIndex, ids: np.ndarray) -> None:
     st["lb"] = max(st["lb"], float(D[ids].max()))
 
 
-def _certify(st: dict, index_y: SurfaceIndex, share: float, budget: int) -> None:
-    """Cut, largest bound first, every cell whose proven bound (:func:`_cell_bounds`) is above
-    ``share`` times the largest exact distance found, until none is left or ``budget`` new points
-    are spent; ``st["bound"]`` then bounds every cell, and its maximum the true maximum over X."""
+def _certify(st: dict, index_y: SurfaceIndex, share: float, budget: int, floor: float = 0.0) -> None:
+    """Cut, largest bound first, every cell whose proven bound (:func:`_cell_bounds`, at most
+    its parent's) is above ``share`` times the largest exact distance found and above ``floor``,
+    until none is left or the next cuts could pass ``budget`` new points (a cut adds at most
+    three); ``st["bound"]`` then bounds every cell, and its maximum the true maximum over X."""
     if st.get("bound") is None:
         st["bound"] = np.full(len(st["cells"]), np.nan)
+        st["cap"] = np.full(len(st["cells"]), np.inf)
     cert = st.setdefault("cert", {"cells_cut": 0, "points": 0, "rounds": 0})
     _raise_lb(st, index_y, np.arange(len(st["P"])))
     for _ in range(_CERT_ROUNDS):
         todo = np.flatnonzero(np.isnan(st["bound"]))
-        st["bound"][todo] = _cell_bounds(st, index_y, todo)
+        st["bound"][todo] = np.minimum(_cell_bounds(st, index_y, todo), st["cap"][todo])
         b = st["bound"]
-        open_ = np.flatnonzero(b > share * st["lb"])
-        if len(open_) == 0 or cert["points"] >= budget:
+        open_ = np.flatnonzero(b > max(share * st["lb"], floor))
+        room = (budget - cert["points"]) // 3
+        if len(open_) == 0 or room <= 0:
             break
-        take = np.sort(open_[np.argsort(-b[open_], kind="stable")[:_CERT_BATCH]])
+        take = np.sort(open_[np.argsort(-b[open_], kind="stable")[:min(_CERT_BATCH, room)]])
         new = _split(st, index_y, take)
         cert["cells_cut"] += len(take)
         cert["points"] += len(new)
         cert["rounds"] += 1
         _raise_lb(st, index_y, new)
     todo = np.flatnonzero(np.isnan(st["bound"]))
-    st["bound"][todo] = _cell_bounds(st, index_y, todo)
+    st["bound"][todo] = np.minimum(_cell_bounds(st, index_y, todo), st["cap"][todo])
+    cert["open_cells"] = int((st["bound"] > max(share * st["lb"], floor)).sum())
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,
              verify: bool = True, straddling: bool = False, prune: bool = True,
-             extra: tuple[np.ndarray, np.ndarray] | None = None, bound_share: float = 0.0,
-             bound_points: int = 0) -> Directed:
+             extra: tuple[np.ndarray, np.ndarray] | None = None) -> Directed:
     """The distances from the grid's points (on X) to Y, refined around the peaks; see the
     module docstring. With ``straddling``, every cell whose corners are closest to different
     triangles of Y is cut once before the refinement (the distance to one triangle is convex
@@ -498,7 +504,7 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
     cells around them are cut too, whatever their distances (:func:`hausdorff` passes the
     places on the simplified surface closest to the original's farthest points).
 
-    ``bound_share`` > 0: then prove an upper bound of the maximum (:func:`certify`)."""
+    :func:`certify` goes on from the result to a proven upper bound of the maximum."""
     P = grid.P
     if len(P) == 0 or len(index_y.F) == 0:
         inf = 0.0 if len(P) == 0 else float("inf")
@@ -545,25 +551,27 @@ def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, ro
         pool = np.concatenate([top, _split(st, index_y, sel)])
         if prune:
             _raise_lb(st, index_y, pool)
-    if bound_share > 0:
-        _certify(st, index_y, bound_share, bound_points)
     return _result(st, index_y)
 
 
-def certify(d: Directed, share: float, points: int) -> Directed:
-    """``d`` with a proven upper bound of its maximum: every
-    cell whose bound (:func:`_cell_bounds`) is above ``share`` times the largest exact distance
-    found is cut, largest bound first, until none is left or ``points`` new points are spent.
-    ``Directed.bound`` is then the largest bound of any cell: the distance to Y at any point of X
-    is at most that (up to floating-point rounding); ``bound <= share * max`` when it finished."""
+def certify(d: Directed, share: float, points: int, floor: float = 0.0) -> Directed:
+    """``d`` with a proven upper bound of its maximum: every cell whose bound
+    (:func:`_cell_bounds`) is above ``share`` times the largest exact distance found, and above
+    ``floor``, is cut, largest bound first, until none is left or ``points`` new points would be
+    passed. ``Directed.bound`` is then the largest bound of any cell: the distance to Y at any
+    point of X is at most that (up to floating-point rounding); it is at most
+    ``max(share * max, floor)`` when it finished (``certification["open_cells"] == 0``)."""
     if d.state is None:
         return d
     # a copy that shares no buffer with ``d`` (its distances are made exact in place)
     st = {k: v for k, v in d.state.items() if not k.startswith("_")}
     st["D"] = st["D"].copy()
-    if st.get("bound") is not None:
-        st["bound"] = st["bound"].copy()
-    _certify(st, st["index"], share, points)
+    for k in ("bound", "cap"):
+        if st.get(k) is not None:
+            st[k] = st[k].copy()
+    if "cert" in st:
+        st["cert"] = dict(st["cert"])
+    _certify(st, st["index"], share, points, floor)
     return _result(st, st["index"])
 
 
@@ -698,9 +706,11 @@ def _symmetric(ab: Directed, ba: Directed) -> HausdorffResult:
                            a_to_b=ab, b_to_a=ba, exact=ab.exact and ba.exact)
 
 
-def bound_hausdorff(h: HausdorffResult, share: float, points: int) -> HausdorffResult:
-    """``h`` with a proven upper bound of each direction's maximum (:func:`certify`, at most
-    ``points`` new points per direction)."""
+def bound_hausdorff(h: HausdorffResult, share: float, points: int, floor: float = 0.0,
+                    both: bool = True) -> HausdorffResult:
+    """``h`` with a proven upper bound of the original -> simplified maximum and (``both``) of the
+    other direction's (:func:`certify`, at most ``points`` new points per direction)."""
     if h.a_to_b is None or h.b_to_a is None:
         return h
-    return _symmetric(certify(h.a_to_b, share, points), certify(h.b_to_a, share, points))
+    return _symmetric(certify(h.a_to_b, share, points, floor),
+                      certify(h.b_to_a, share, points, floor) if both else h.b_to_a)

@@ -361,3 +361,33 @@ def test_borders_stay_on_the_input_border_and_folds_are_counted(method):
     folds = _independent_folds(out.positions, out.triangles)
     assert rec.accuracy["folds"] == folds
     assert folds == 0 or any("fold" in w for w in rec.warnings)
+
+
+def test_backing_off_to_the_input_returns_the_input(monkeypatch):
+    """When no count below the input is acceptable, the stage backs off to the input itself and
+    returns it unchanged, with the default fit and refine rounds on (the corpus house at 30% and
+    50% crashed here: the fit and the refine rounds ran on the input, which has no flip check)."""
+    V, F = bumpy_sphere(2)
+    sc = make_scene(V, F)
+    T0 = len(F)
+    real = S._defects
+    monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 else real(o))
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5))  # the defaults
+    assert out.n_triangles == T0
+    got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(T0, -1), axis=0)
+    want = np.sort(np.sort(sc.positions[sc.triangles], axis=1).reshape(T0, -1), axis=0)
+    np.testing.assert_array_equal(got, want)
+    assert any("stopped at" in w for w in rec.warnings)
+    assert rec.accuracy["hausdorff_max"] < 1e-12
+
+
+@pytest.mark.corpus
+@pytest.mark.slow
+def test_house_backs_off_with_the_default_settings():
+    sc = load_corpus("house_max2obj_walls", "regr01.obj")
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.3))
+    out.validate()
+    assert out.n_triangles <= sc.n_triangles
+    assert rec.accuracy["flipped_triangles"] == 0 and rec.accuracy["new_nonmanifold_edges"] == 0
+    if out.n_triangles > 1.01 * rec.details["target_triangles"]:
+        assert any("stopped at" in w for w in rec.warnings)

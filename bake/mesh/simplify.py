@@ -50,8 +50,9 @@ After the library (bake/mesh/simplify_repair.py for the local repairs):
    how much the distance grows between samples) and is never called exact. Then, on the result
    kept (``error_bound``), an upper bound of the true maximum is *proven*: the grid's cells are
    cut, largest bound first, until no cell can hold a distance more than 2% above the largest
-   found (``simplify_measure.certify``); the record gives the bound, whether it got within 2%,
-   and what it cost. Cutting finds peaks the sample missed (the CSG model at 2%: 7.6% higher).
+   found or BOUND_FLOOR of the diagonal, or a budget of points is spent
+   (``simplify_measure.certify``); the record gives the bound, whether it got there, and what it
+   cost. Cutting finds peaks the sample missed (the CSG model at 2%: 7.6% higher).
 5. with a triangle target, a result that still has flipped triangles, new non-manifold edges or
    an error above ``error_ceiling`` is not accepted: the stage backs off to the smallest larger
    count that is acceptable and says so in the record (no holes on flat CAD-like geometry).
@@ -820,7 +821,7 @@ def _prove_bound(ctx: _Ctx, h: HausdorffResult) -> tuple[HausdorffResult, dict |
     ``error_bound`` asks for (simplify_measure.certify: cells cut, largest bound first, until none
     can hold more than BOUND_SHARE times the largest distance found or BOUND_FLOOR of the
     diagonal, or the points run out)."""
-    if h.a_to_b is None or h.b_to_a is None:  # (the input itself, backed off to: nothing measured)
+    if h.a_to_b is None or h.b_to_a is None:  # (backed off all the way: the input, not measured)
         return h, None
     t = time.perf_counter()
     points = _BOUND_POINTS * ctx.cfg.error_samples

@@ -470,23 +470,26 @@ def _certify(st: dict, index_y: SurfaceIndex, share: float, budget: int, floor: 
         st["cap"] = np.full(len(st["cells"]), np.inf)
     cert = st.setdefault("cert", {"cells_cut": 0, "points": 0, "rounds": 0})
     _raise_lb(st, index_y, np.arange(len(st["P"])))
-    for _ in range(_CERT_ROUNDS):
+
+    def open_cells() -> np.ndarray:
+        """Bound the cells not bounded yet (new children); the cells still above the target."""
         todo = np.flatnonzero(np.isnan(st["bound"]))
         st["bound"][todo] = np.minimum(_cell_bounds(st, index_y, todo), st["cap"][todo])
-        b = st["bound"]
-        open_ = np.flatnonzero(b > max(share * st["lb"], floor))
+        return np.flatnonzero(st["bound"] > max(share * st["lb"], floor))
+
+    open_ = open_cells()
+    for _ in range(_CERT_ROUNDS):
         room = (budget - cert["points"]) // 3
         if len(open_) == 0 or room <= 0:
             break
-        take = np.sort(open_[np.argsort(-b[open_], kind="stable")[:min(_CERT_BATCH, room)]])
+        take = np.sort(open_[np.argsort(-st["bound"][open_], kind="stable")[:min(_CERT_BATCH, room)]])
         new = _split(st, index_y, take)
         cert["cells_cut"] += len(take)
         cert["points"] += len(new)
         cert["rounds"] += 1
         _raise_lb(st, index_y, new)
-    todo = np.flatnonzero(np.isnan(st["bound"]))
-    st["bound"][todo] = np.minimum(_cell_bounds(st, index_y, todo), st["cap"][todo])
-    cert["open_cells"] = int((st["bound"] > max(share * st["lb"], floor)).sum())
+        open_ = open_cells()
+    cert["open_cells"] = int(len(open_))
 
 
 def directed(index_y: SurfaceIndex, grid: SurfaceGrid, *, seeds: int = SEEDS, rounds: int = ROUNDS,

@@ -21,6 +21,7 @@ from bake.mesh.simplify_error import SurfaceIndex
 from bake.mesh.simplify_measure import hausdorff, surface_grid
 
 from conftest import corpus_path
+from meshgen import heightfield
 from simplify_reference import hausdorff_reference, point_triangle_distance
 
 MODELS = {
@@ -253,12 +254,7 @@ def test_past_its_cap_the_simplified_grid_cuts_every_triangle_twice():
     assert M.simplified_grid(34725, 20000) == (80000, 2)
     # on a uniform sheet of that size the levels jump (2 nodes per triangle at level 1, about 8
     # at level 2): under the cap alone the grid stays at level 1
-    k = 132
-    x, y = np.meshgrid(np.linspace(0, 1, k), np.linspace(0, 1, k))
-    V = np.stack([x.ravel(), y.ravel(), 0.02 * np.sin(9 * x.ravel()) * np.cos(7 * y.ravel())], 1)
-    idx = np.arange(k * k).reshape(k, k)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    V, F = heightfield(132, lambda x, y: 0.02 * np.sin(9 * x) * np.cos(7 * y))
     n, level = M.simplified_grid(len(F), 20000)
     capped = M.surface_grid(V, F, n, min_level=M.MIN_LEVEL_SIMPLIFIED)
     g = M.surface_grid(V, F, n, min_level=level)

@@ -68,6 +68,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from ..interrupt import deferred_interrupt
 
@@ -423,15 +424,47 @@ class SurfaceIndex:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
         if len(self.F) == 0 or len(P) == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        R, small, ctree, big = self._ball_index()
-        reach = radius + R
-        # every small triangle whose centroid is within reach: the K nearest within reach
-        # (K = 32, then 1024 for the points that had K); points whose ball holds more than that
-        # take every small triangle (the sphere test below is cheaper than a KD-tree query for
+        R, small, _, big = self._ball_index()
+        rows, tris, full = self._near_knn(P, radius, (32, 1024))
+        # points whose ball holds more than that are tested against every small triangle, and
+        # every point against the big ones (a distance table: cheaper than a KD-tree query for
         # thousands of neighbours, which is what soups of big overlapping triangles ask)
-        rows_l, tris_l = [], []
+        parts = [(rows, tris), self._near_dense(P, radius, full, small), self._near_dense(P, radius, np.arange(len(P)), big)]
+        return np.concatenate([r for r, _ in parts]), np.concatenate([t for _, t in parts])
+
+    def near_set(self, P: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        """The triangles :meth:`near` pairs with any of the points (sorted ids), without listing
+        the pairs: where balls are large (soups of big overlapping triangles put every triangle
+        within reach of every point) each triangle is tested only until one point reaches it."""
+        P = np.asarray(P, np.float64).reshape(-1, 3)
+        radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
+        if len(self.F) == 0 or len(P) == 0:
+            return np.zeros(0, np.int64)
+        R, small, _, big = self._ball_index()
+        _, tris, full = self._near_knn(P, radius, (32,))
+        hit = np.zeros(len(self.F), bool)
+        hit[tris] = True
+        for pts, cand in ((full, small), (np.arange(len(P)), big)):
+            cand = cand[~hit[cand]]
+            step = max(1, (1 << 20) // max(len(cand), 1))
+            for s in range(0, len(pts), step):
+                if len(cand) == 0:
+                    break
+                _, t = self._near_dense(P, radius, pts[s:s + step], cand)
+                hit[t] = True
+                cand = cand[~hit[cand]]
+        return np.flatnonzero(hit)
+
+    def _near_knn(self, P: np.ndarray, radius: np.ndarray, ks: tuple[int, ...]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`near`'s pairs among the small triangles whose centroids are the K nearest
+        within reach of each point (K in ``ks`` in turn, for the points that had K); returns
+        (rows, triangles, the points that had the last K: their balls may hold more)."""
+        R, small, ctree, _ = self._ball_index()
+        reach = radius + R
+        rows_l, tris_l = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
         todo = np.arange(len(P))
-        for K in (32, 1024):
+        for K in ks:
             if len(todo) == 0:
                 break
             K = min(K, len(small))
@@ -446,17 +479,28 @@ class SurfaceIndex:
             rows_l.append(todo[r])
             tris_l.append(small[ii[r, c]])
             todo = todo[full]
-        if len(todo):
-            rows_l.append(np.repeat(todo, len(small)))
-            tris_l.append(np.tile(small, len(todo)))
         rows = np.concatenate(rows_l)
         tris = np.concatenate(tris_l)
-        if len(big):
-            rows = np.concatenate([rows, np.repeat(np.arange(len(P)), len(big))])
-            tris = np.concatenate([tris, np.tile(big, len(P))])
         lb = np.linalg.norm(P[rows] - self.centers[tris], axis=1) - self.radii[tris]
         sel = lb <= radius[rows] * (1 + 1e-12) + 1e-300
-        return rows[sel], tris[sel]
+        return rows[sel], tris[sel], todo
+
+    def _near_dense(self, P: np.ndarray, radius: np.ndarray, pts: np.ndarray, tris: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`near`'s pairs between points ``pts`` and triangles ``tris``, every pair tested
+        (a distance table, in blocks of about a million pairs; row-major order)."""
+        if len(pts) == 0 or len(tris) == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        C, rad = self.centers[tris], self.radii[tris]
+        step = max(1, (1 << 20) // len(tris))
+        rows_l, tris_l = [], []
+        for s in range(0, len(pts), step):
+            p = pts[s:s + step]
+            ok = cdist(P[p], C) - rad[None] <= radius[p, None] * (1 + 1e-12) + 1e-300
+            r, c = np.nonzero(ok)
+            rows_l.append(p[r])
+            tris_l.append(tris[c])
+        return np.concatenate(rows_l), np.concatenate(tris_l)
 
     def near_chunks(self, P: np.ndarray, radius: np.ndarray, max_pairs: int = 1 << 22):
         """:meth:`near` over consecutive chunks of the points, sized so a chunk yields about
@@ -729,8 +773,7 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     if len(sus) == 0:
         return
     cen, rad = bounding_spheres(res.corners[sus])
-    orig = np.unique(np.concatenate([np.unique(t) for _, _, t in
-                                     index_a.near_chunks(cen, rad + res.reach[sus] + tol)]))
+    orig = index_a.near_set(cen, rad + res.reach[sus] + tol)
     orig = orig[index_a.reliable[orig]]
     if len(orig) == 0:
         res.flipped[sus] = True

@@ -391,3 +391,36 @@ def test_house_backs_off_with_the_default_settings():
     assert rec.accuracy["flipped_triangles"] == 0 and rec.accuracy["new_nonmanifold_edges"] == 0
     if out.n_triangles > 1.01 * rec.details["target_triangles"]:
         assert any("stopped at" in w for w in rec.warnings)
+
+
+def test_phase_seconds_count_every_attempt(monkeypatch):
+    """The record's library/check/repair seconds are totals over every attempt (the peak
+    round's second run, back-off probes), not the kept result's alone: each library call and
+    each flip check is made to take at least 20 ms here, and the record must hold them all."""
+    import time as _time
+
+    calls = {"library": 0, "flip": 0}
+    lib, flip = S.simplify_meshopt.simplify, S._flip_check
+
+    def slow_lib(*a, **k):
+        calls["library"] += 1
+        _time.sleep(0.02)
+        return lib(*a, **k)
+
+    def slow_flip(*a, **k):
+        calls["flip"] += 1
+        _time.sleep(0.02)
+        return flip(*a, **k)
+
+    monkeypatch.setattr(S.simplify_meshopt, "simplify", slow_lib)
+    monkeypatch.setattr(S, "_flip_check", slow_flip)
+    V, F = bumpy_sphere(3)
+    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
+    d = rec.details
+    assert d["peak_rounds"], "the test needs a second run of the library"
+    assert calls["library"] >= 2 and calls["flip"] >= 3
+    assert d["library_seconds"] >= 0.02 * calls["library"]
+    # flip checks count as checks (after the library, the fit) or as the refine rounds' repairs
+    assert d["check_seconds"] + d["repair_seconds"] >= 0.02 * calls["flip"]
+    phases = ("prepare", "library", "repair", "check", "fit", "measure", "other")
+    assert sum(d[f"{p}_seconds"] for p in phases) == pytest.approx(rec.seconds, abs=1e-3)

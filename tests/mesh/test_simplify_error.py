@@ -147,6 +147,32 @@ def test_near_chunks_equal_one_query():
     assert np.array_equal(np.unique(ref, axis=0), a)
 
 
+
+@pytest.mark.parametrize("soup", [False, True])
+def test_near_pairs_and_near_set_against_every_pair(soup):
+    """near()'s pairs and near_set()'s triangles equal a test of every (point, triangle) pair, on a
+    fine mesh and on a soup of big overlapping triangles (where most balls hold more than the
+    K-nearest queries' 32 and 1,024 triangles and the dense paths take over)."""
+    rng = np.random.default_rng(5)
+    if soup:
+        V = rng.normal(size=(6000, 3))
+        F = rng.integers(0, len(V), size=(2000, 3))
+    else:
+        V, F = bumpy(3)
+    idx = SurfaceIndex(V, F, seed=1)
+    P = rng.normal(size=(300, 3)) * 1.5
+    r = rng.random(300) ** 4 * 2.0
+    lb = np.linalg.norm(P[:, None, :] - idx.centers[None], axis=2) - idx.radii[None]
+    ref = np.argwhere(lb <= r[:, None] * (1 + 1e-12))
+    rows, tris = idx.near(P, r)
+    got = np.stack([rows, tris], 1)
+    assert len(np.unique(got, axis=0)) == len(got)  # no pair twice
+    assert np.array_equal(np.unique(got, axis=0), ref)
+    assert np.array_equal(idx.near_set(P, r), np.unique(ref[:, 1]))
+    # a point alone, and radii that reach nothing
+    assert np.array_equal(idx.near_set(P[:1], r[:1]), np.unique(ref[ref[:, 0] == 0, 1]))
+    assert len(idx.near_set(P + 100.0, np.zeros(len(P)))) == 0
+
 # --------------------------------------------------------------------------- flips
 def test_flat_cad_panel_retriangulated_has_no_flips():
     """A flat panel cut into a fine grid, against the same panel triangulated as a fan from one

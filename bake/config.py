@@ -93,6 +93,7 @@ class SimplifyConfig:
     fit_iterations: int = 3
     # Needs measure_error: rounds of local repair where the measured error peaks (edges turned,
     # free corners moved to lower the local maximum); kept only if the measured max drops (0 = off).
+    # Neither these nor the peak rounds run on a result within 0.01% of the diagonal already.
     refine_rounds: int = 2
     # With a triangle target and refine_rounds > 0: rounds of locking the input vertices where
     # the result cut the most off (a spout tip) and running the stage again; each is kept only if

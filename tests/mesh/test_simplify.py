@@ -424,3 +424,44 @@ def test_phase_seconds_count_every_attempt(monkeypatch):
     assert d["check_seconds"] + d["repair_seconds"] >= 0.02 * calls["flip"]
     phases = ("prepare", "library", "repair", "check", "fit", "measure", "other")
     assert sum(d[f"{p}_seconds"] for p in phases) == pytest.approx(rec.seconds, abs=1e-3)
+
+
+def test_nothing_to_collapse_returns_the_input_without_rounds():
+    """A box cannot lose a triangle (every collapse would fold a face): the library hands back
+    the 12 triangles, and the stage returns the input itself (error 0) instead of fitting,
+    measuring and refining a copy of it (0.5 s on a 12-triangle box before)."""
+    m = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.5))
+    assert out.n_triangles == 12
+    got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(12, -1), axis=0)
+    want = np.sort(np.sort(V[F], axis=1).reshape(12, -1), axis=0)
+    np.testing.assert_array_equal(got, want)
+    assert rec.accuracy["hausdorff_max"] == 0.0
+    assert rec.details["measures"] == 0 and rec.details["refine"] == [] and "peak_rounds" not in rec.details
+    assert any("target of 6" in w for w in rec.warnings)
+
+
+def test_no_rounds_below_the_floor():
+    """A flat box cut into 48 triangles simplified to 24 has an error of rounding size: the
+    refine and peak rounds do not run (below ROUNDS_FLOOR of the diagonal), and the result is
+    still within the floor of the input by an independent measure (every output vertex and
+    points on every output triangle against the input's faces, trimesh's closest points)."""
+    m = trimesh.creation.box(extents=(1.0, 2.0, 3.0)).subdivide()
+    V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
+    sc = make_scene(V, F)
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5))
+    assert out.n_triangles < len(F)
+    assert rec.details["refine"] == [] and "peak_rounds" not in rec.details
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    bary = np.random.default_rng(0).dirichlet(np.ones(3), 50)
+    P = np.concatenate([out.positions, np.einsum("pk,tkd->tpd", bary, out.positions[out.triangles]).reshape(-1, 3)])
+    # trimesh's closest point on every input face (48 faces: one call per face)
+    d = np.min([np.linalg.norm(trimesh.triangles.closest_point(np.repeat(V[f][None], len(P), 0), P) - P, axis=1)
+                for f in F], axis=0)
+    assert d.max() <= S.ROUNDS_FLOOR * diag
+    assert rec.accuracy["hausdorff_max"] <= S.ROUNDS_FLOOR
+    # above the floor the rounds do run (a curved surface)
+    Vb, Fb = bumpy_sphere(3)
+    _, rec2 = S.stage(make_scene(Vb, Fb), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
+    assert rec2.accuracy["hausdorff_max"] > S.ROUNDS_FLOOR and rec2.details["refine"]

@@ -1383,13 +1383,13 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             # fewer triangles cost flips, non-manifold edges or more than the ceiling: find the
             # smallest count above the target that does not
             why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
-                   f"non-manifold edges" if _defects(out) else f"error {h.max / scale:.3%} of the diagonal")
+                   f"non-manifold edges" if _defects(out) else
+                   f"an error of {h.max / scale:.3%} of the diagonal (error_ceiling = {cfg.error_ceiling})")
             n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
                 if n < T0:  # (the input itself, backed off to, is exact as it is: not measured)
                     o2, h2 = fitted(o2)  # kept only if not worse than the probe's measured result
-                rec.warn(f"{target} triangles would cost {why} (error_ceiling = {cfg.error_ceiling}); "
-                         f"stopped at {len(o2.F)} triangles instead")
+                rec.warn(f"{target} triangles would cost {why}; stopped at {len(o2.F)} triangles instead")
                 out, h = o2, h2
                 details["backed_off_from"] = target
             details["probes"] = probes

@@ -377,8 +377,22 @@ def test_backing_off_to_the_input_returns_the_input(monkeypatch):
     got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(T0, -1), axis=0)
     want = np.sort(np.sort(sc.positions[sc.triangles], axis=1).reshape(T0, -1), axis=0)
     np.testing.assert_array_equal(got, want)
-    assert any("stopped at" in w for w in rec.warnings)
+    assert any("stopped at" in w and "flipped" in w and "error_ceiling" not in w for w in rec.warnings)
     assert rec.accuracy["hausdorff_max"] < 1e-12
+
+
+def test_error_ceiling_backs_off_to_more_triangles():
+    """A target whose error would pass error_ceiling stops at more triangles, says why, and
+    the result's measured error is within the ceiling."""
+    V, F = bumpy_sphere(3)
+    ceiling = 0.001
+    out, rec = S.stage(make_scene(V, F), cfg(target_ratio=0.02, error_ceiling=ceiling))
+    assert out.n_triangles > rec.details["backed_off_from"] == int(round(0.02 * len(F)))
+    assert rec.accuracy["hausdorff_max"] <= ceiling
+    assert any("would cost an error of" in w and f"error_ceiling = {ceiling}" in w and "stopped at" in w
+               for w in rec.warnings)
+    assert all(p["ok"] == (p["hausdorff_max"] is not None and p["hausdorff_max"] <= ceiling and p["defects"] == 0)
+               for p in rec.details["probes"])
 
 
 @pytest.mark.corpus

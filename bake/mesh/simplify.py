@@ -1389,7 +1389,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             if o2 is not None:
                 if n < T0:  # (the input itself, backed off to, is exact as it is: not measured)
                     o2, h2 = fitted(o2)  # kept only if not worse than the probe's measured result
-                rec.warn(f"{target} triangles would cost {why}; stopped at {len(o2.F)} triangles instead")
+                got = "" if len(out.F) == target else f" (what a target of {target} gave)"
+                rec.warn(f"{len(out.F)} triangles{got} would cost {why}; stopped at {len(o2.F)} triangles instead")
                 out, h = o2, h2
                 details["backed_off_from"] = target
             details["probes"] = probes

@@ -570,14 +570,16 @@ def _finish(ctx: _Ctx, raw: _Raw) -> _Out:
 
 
 def _identity(ctx: _Ctx) -> _Out:
-    """The input itself as a result (what backing off to the input's count gives)."""
+    """The input itself as a result (what backing off to the input's count gives), with its
+    error, exactly 0, as its measure (so nothing measures it against itself)."""
     prep = ctx.prep
     T = len(prep.F)
     z = np.zeros(T, bool)
     return _Out(V=prep.V, F=prep.F, src_vertex=np.arange(len(prep.V)), region=prep.region, src_tri=np.arange(T),
                 tri_uvs=None if prep.tri_uvs is None else prep.tri_uvs, fixed=np.ones(len(prep.V), bool),
                 fit_info={"rounds": 0}, notes=[], flipped=z,
-                new_nonmanifold=z.copy(), folded=z.copy())
+                new_nonmanifold=z.copy(), folded=z.copy(),
+                h=HausdorffResult(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, np.zeros(3), 0, 0))
 
 
 def _flip_check(ctx: _Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None = None) -> FlipResult:
@@ -1354,7 +1356,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
     def whole(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS, fit: bool = True,
               refuse_topology: bool = False):
         if target >= T0:  # backing off all the way: the input as it is
-            return _identity(ctx), HausdorffResult(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, np.zeros(3), 0, 0)
+            o = _identity(ctx)
+            return o, o.h
         if not fit:  # a back-off probe: the library's result, measured (the fit comes once, after)
             o = attempt(target, lock0, rounds)
             if len(o.F) >= T0:
@@ -1387,8 +1390,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                    f"an error of {h.max / scale:.3%} of the diagonal (error_ceiling = {cfg.error_ceiling})")
             n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
-                if n < T0:  # (the input itself, backed off to, is exact as it is: not measured)
-                    o2, h2 = fitted(o2)  # kept only if not worse than the probe's measured result
+                o2, h2 = fitted(o2)  # kept only if not worse than the probe's measured result
                 got = "" if len(out.F) == target else f" (what a target of {target} gave)"
                 rec.warn(f"{len(out.F)} triangles{got} would cost {why}; stopped at {len(o2.F)} triangles instead")
                 out, h = o2, h2
@@ -1399,7 +1401,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             if "backed_off_from" not in details and cfg.peak_rounds > 0 and h.max > ROUNDS_FLOOR * scale:
                 out, h = _peak_rounds(ctx, out, h, whole, target, details)
     else:
-        target, out, h = _search_error(prep, method, value * scale, T0, whole, probes, scale)
+        target, out, h = _search_error(prep, method, value * scale, T0, whole, probes, scale, ctx.seconds)
         details["max_error_target"] = value
         details["probes"] = probes
         if cfg.refine_rounds and h.max > ROUNDS_FLOOR * scale:
@@ -1606,7 +1608,8 @@ def _back_off(target: int, T0: int, whole, acceptable, probes: list, scale: floa
     return good, out, h
 
 
-def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, whole, probes: list, scale: float):
+def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, whole, probes: list, scale: float,
+                  seconds: dict):
     """Smallest triangle count (within ~5%) whose measured Hausdorff max is <= e_abs."""
     tried: dict[int, tuple] = {}
 
@@ -1623,7 +1626,9 @@ def _search_error(prep: _Prepared, method: str, e_abs: float, T0: int, whole, pr
     # first guess: meshoptimizer's own error bound, else 10% of the input
     if method == "meshopt":
         Fw, w_vertex, _, _ = _wedges(prep)
+        t = time.perf_counter()
         raw_n = len(simplify_meshopt.simplify(prep.V[w_vertex], Fw, 0, target_error=e_abs, absolute_error=True)[0])
+        seconds["library"] += time.perf_counter() - t
         n = max(raw_n, 4)
     else:
         n = max(T0 // 10, 4)

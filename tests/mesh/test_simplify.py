@@ -363,22 +363,32 @@ def test_borders_stay_on_the_input_border_and_folds_are_counted(method):
     assert folds == 0 or any("fold" in w for w in rec.warnings)
 
 
-def test_backing_off_to_the_input_returns_the_input(monkeypatch):
+@pytest.mark.parametrize("stuck", [False, True])
+def test_backing_off_to_the_input_returns_the_input(monkeypatch, stuck):
     """When no count below the input is acceptable, the stage backs off to the input itself and
     returns it unchanged, with the default fit and refine rounds on (the corpus house at 30% and
-    50% crashed here: the fit and the refine rounds ran on the input, which has no flip check)."""
+    50% crashed here: the fit and the refine rounds ran on the input, which has no flip check).
+    Its error is exactly 0, not a measure of the input against itself, also when a probe below
+    the input's count gets every triangle back (``stuck``: a library that collapses nothing
+    above 95% of the input)."""
     V, F = bumpy_sphere(2)
     sc = make_scene(V, F)
     T0 = len(F)
     real = S._defects
     monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 else real(o))
+    if stuck:
+        lib = S.simplify_meshopt.simplify
+        monkeypatch.setattr(S.simplify_meshopt, "simplify",
+                            lambda V, F, target, **k: (F.copy(), 0.0) if target > 0.95 * len(F) else lib(V, F, target, **k))
     out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5))  # the defaults
     assert out.n_triangles == T0
     got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(T0, -1), axis=0)
     want = np.sort(np.sort(sc.positions[sc.triangles], axis=1).reshape(T0, -1), axis=0)
     np.testing.assert_array_equal(got, want)
     assert any("stopped at" in w and "flipped" in w and "error_ceiling" not in w for w in rec.warnings)
-    assert rec.accuracy["hausdorff_max"] < 1e-12
+    assert rec.accuracy["hausdorff_max"] == 0.0 and rec.details["error_bound"] is None
+    if stuck:
+        assert any(p["target"] < T0 and p["triangles"] == T0 and p["ok"] for p in rec.details["probes"])
 
 
 def test_error_ceiling_backs_off_to_more_triangles():
@@ -445,6 +455,10 @@ def test_phase_seconds_count_every_attempt(monkeypatch):
     assert d["check_seconds"] + d["repair_seconds"] >= 0.02 * calls["flip"]
     phases = ("prepare", "library", "repair", "check", "fit", "measure", "other")
     assert sum(d[f"{p}_seconds"] for p in phases) == pytest.approx(rec.seconds, abs=1e-3)
+    # an error target: the search's first guess is a library call too
+    calls["library"] = 0
+    _, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, max_error=0.01, error_samples=4000))
+    assert calls["library"] >= 2 and rec.details["library_seconds"] >= 0.02 * calls["library"]
 
 
 def test_nothing_to_collapse_returns_the_input_without_rounds():

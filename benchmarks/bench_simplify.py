@@ -236,6 +236,7 @@ def row_for(scene, out, rec, seconds: float, lib_s: float, model: str, ratio, or
     diag = scene.scale()
     ref = reference(scene.positions, scene.triangles, out.positions, out.triangles, diag)
     acc, det = rec.accuracy, rec.details
+    bound_o = ((det.get("error_bound") or {}).get("original_to_simplified") or {})
     return {
         "model": model, "ratio": ratio, "ordering": ordering, "triangles_in": int(scene.n_triangles),
         "target": int(det.get("target_triangles", 0)), "triangles_out": int(out.n_triangles),
@@ -255,10 +256,8 @@ def row_for(scene, out, rec, seconds: float, lib_s: float, model: str, ratio, or
         "bound_a_to_b": acc.get("hausdorff_bound_original_to_simplified"),
         "bound_a_to_b_over_reference": acc["hausdorff_bound_original_to_simplified"] / ref["a_to_b"]
         if acc.get("hausdorff_bound_original_to_simplified") is not None and ref["a_to_b"] > 0 else None,
-        "bound_a_to_b_within_share": ((det.get("error_bound") or {}).get("original_to_simplified") or {}).get(
-            "within_share"),
-        "bound_a_to_b_finished": ((det.get("error_bound") or {}).get("original_to_simplified") or {}).get(
-            "finished"),
+        "bound_a_to_b_within_share": bound_o.get("within_share"),
+        "bound_a_to_b_finished": bound_o.get("finished"),
         "bound_seconds": (det.get("error_bound") or {}).get("seconds"),
         "stage_seconds": round(seconds, 3), "library_seconds": round(lib_s, 5),
         "stage_over_library": round(seconds / lib_s, 1) if lib_s > 0 else None,

@@ -1358,15 +1358,12 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         if target >= T0:  # backing off all the way: the input as it is
             o = _identity(ctx)
             return o, o.h
-        if not fit:  # a back-off probe: the library's result, measured (the fit comes once, after)
-            o = attempt(target, lock0, rounds)
-            if len(o.F) >= T0:
-                return whole(T0)
-            # a result with defects is refused whatever its error: not measured
-            return o, (_measure(ctx, o) if measuring and _defects(o) == 0 else None)
         o = attempt(target, lock0, rounds)
         if len(o.F) >= T0:  # nothing collapsed (a box): the input itself is as many triangles, exact
             return whole(T0)
+        if not fit:  # a back-off probe: the library's result, measured (the fit comes once, after)
+            # a result with defects is refused whatever its error: not measured
+            return o, (_measure(ctx, o) if measuring and _defects(o) == 0 else None)
         if refuse_topology and o.new_nonmanifold.any():
             # refused whatever its error (the triangle target backs off from it; the fit moves
             # vertices only, so it cannot mend the topology): neither fitted nor measured

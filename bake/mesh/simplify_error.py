@@ -424,12 +424,13 @@ class SurfaceIndex:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
         if len(self.F) == 0 or len(P) == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        R, small, _, big = self._ball_index()
+        _, small, _, big = self._ball_index()
         rows, tris, full = self._near_knn(P, radius, (32, 1024))
         # points whose ball holds more than that are tested against every small triangle, and
         # every point against the big ones (a distance table: cheaper than a KD-tree query for
         # thousands of neighbours, which is what soups of big overlapping triangles ask)
-        parts = [(rows, tris), self._near_dense(P, radius, full, small), self._near_dense(P, radius, np.arange(len(P)), big)]
+        parts = [(rows, tris), self._near_dense(P, radius, full, small),
+                 self._near_dense(P, radius, np.arange(len(P)), big)]
         return np.concatenate([r for r, _ in parts]), np.concatenate([t for _, t in parts])
 
     def near_set(self, P: np.ndarray, radius: np.ndarray) -> np.ndarray:
@@ -440,7 +441,7 @@ class SurfaceIndex:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
         if len(self.F) == 0 or len(P) == 0:
             return np.zeros(0, np.int64)
-        R, small, _, big = self._ball_index()
+        _, small, _, big = self._ball_index()
         _, tris, full = self._near_knn(P, radius, (32,))
         hit = np.zeros(len(self.F), bool)
         hit[tris] = True

@@ -1,7 +1,7 @@
 """Simplification: the error the stage reports against an independent measurement, for any
 vertex order, with the stage's seconds next to the bare library call's, side by side in one run.
 
-    .venv/bin/python benchmarks/bench_simplify.py [--models bunny,spot,teapot,boolean]
+    .venv/bin/python benchmarks/bench_simplify.py [--models bunny,spot,teapot,boolean,strips]
         [--ratios 0.5,0.1,0.02,0.01] [--orderings given,right,shuffle1,...,shuffle5]
         [--before GIT_REF] [--no-methods] [--no-sweep] [--no-speed] [--out benchmarks/results/simplify.json]
     .venv/bin/python benchmarks/bench_simplify.py --models "" --no-methods --no-sweep --before main   # speed rows only
@@ -65,6 +65,7 @@ MODELS = {
     "spot": "spot_triangulated/spot/spot_triangulated.obj",
     "teapot": "teapot_obj/teapot.obj",
     "boolean": "boolean_csg_slivers/boolean.glb",  # CSG parts: sharp edges, slivers (the CAD model)
+    "strips": "triangle_strips_scene/mode5.gltf",  # triangle strips: a third of its triangles are needles
     "suzanne": "suzanne_obj/suzanne.obj",
     "ico4": "ico4_mtl/ico4.obj",
 }
@@ -286,7 +287,7 @@ def before_row(before: Before, path: Path, overrides, cfg: dict, repeat: int = 1
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--models", default="bunny,spot,teapot,boolean")
+    ap.add_argument("--models", default="bunny,spot,teapot,boolean,strips")
     ap.add_argument("--ratios", default="0.5,0.1,0.02,0.01")
     ap.add_argument("--orderings", default="given,right,shuffle1,shuffle2,shuffle3,shuffle4,shuffle5",
                     help="for the bunny; the other models run as given")

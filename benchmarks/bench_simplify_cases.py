@@ -1,7 +1,7 @@
 """The simplify stage on corpus models where it used to waste its time, side by side with the
 stage of another commit.
 
-    .venv/bin/python benchmarks/bench_simplify_cases.py --before GIT_REF [--out benchmarks/results/simplify_cases.json]
+    .venv/bin/python benchmarks/bench_simplify_cases.py [--before GIT_REF (default b00b62d)] [--out benchmarks/results/simplify_cases.json]
 
 Each case runs the stage of this tree and the stage of ``GIT_REF`` (a ``git archive`` of its
 bake/, in a subprocess: bench_simplify.Before) in turn, each run of one between runs of the
@@ -53,7 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     import bench_simplify as B
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--before", required=True, help="the git ref whose stage runs beside this tree's")
+    # (`make bench` runs every benchmark without arguments: the default is the commit the cases
+    # were found on, the one docs/simplify.md's table compares with)
+    ap.add_argument("--before", default="b00b62d", help="the git ref whose stage runs beside this tree's")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simplify_cases.json"))
     args = ap.parse_args(argv)
     rows = []

@@ -265,3 +265,92 @@ def test_csg_model_at_two_percent_finds_the_peak_the_sample_missed():
     assert log["max_after"] > 1.05 * log["max_before"]  # the sample alone was low
     assert log["within_share"] and log["finished"]
     assert rec.accuracy["hausdorff_bound_original_to_simplified"] * diag >= ref.a_to_b.max * (1 - 1e-9)
+
+
+def _slivers():
+    """A fan of long thin triangles (needles: one short edge) and flat ones (caps: one long
+    edge), wavy so the distances vary along them, with a few well-shaped triangles between."""
+    n = 24
+    t = np.linspace(0.0, 1.0, n + 1)
+    top = np.stack([t, np.full_like(t, 0.04), 0.02 * np.sin(9 * t)], 1)
+    bot = np.stack([t + 0.5 / n, np.zeros_like(t), 0.02 * np.cos(7 * t)], 1)
+    V = np.concatenate([top, bot, [[0.5, 3.0, 0.1]]])
+    F = [[i, n + 1 + i, i + 1] for i in range(n)] + [[i + 1, n + 1 + i, n + 2 + i] for i in range(n - 1)]
+    F += [[i, i + 1, 2 * n + 2] for i in range(n)]  # needles up to the far apex
+    # flat triangles under the strip: a corner just below each third bottom edge's middle
+    caps = [0.5 * (bot[i] + bot[i + 1]) - [0.0, 0.006, 0.0] for i in range(0, n - 1, 3)]
+    F += [[n + 2 + i, n + 1 + i, len(V) + k] for k, i in enumerate(range(0, n - 1, 3))]
+    return np.concatenate([V, caps]), np.asarray(F, np.int64)
+
+
+def test_long_edges_are_cut_and_short_ones_kept():
+    """_split for the proven bound (``thin``) on cells of every shape: children tile their parent
+    (inside it, their areas add up to its area), every child's longest edge is at most 0.8 of its
+    parent's (the bound shrinks with the cell), and a cell gets four children only when its three
+    edges are long (a needle three, a flat cell two): fewer points on thin triangles for the same
+    shrinking. The measure's own cuts (not ``thin``) still cut every cell into four."""
+    from bake.mesh.simplify_measure import _split
+
+    V, F = _slivers()
+    Vo, Fo = _other_surface(*_bumpy_sphere(2))
+    d = directed(SurfaceIndex(Vo * 0.6, Fo), surface_grid(V, F, 0, spacing=1e9), rounds=0)
+    st = {k: v for k, v in d.state.items() if not k.startswith("_")}
+    P0, cells0 = st["P"].copy(), st["cells"].copy()
+    sel = np.arange(len(cells0))
+    four = {k: v for k, v in d.state.items() if not k.startswith("_")}
+    _split(four, SurfaceIndex(Vo * 0.6, Fo), sel)
+    assert len(four["cells"]) == 4 * len(cells0)
+    new = _split(st, SurfaceIndex(Vo * 0.6, Fo), sel, thin=True)
+    P, kids = st["P"], st["cells"]
+    assert len(P) == len(P0) + len(new)
+    np.testing.assert_array_equal(P[:len(P0)], P0)
+
+    def longest(C):
+        return np.max(np.linalg.norm(C - C[:, [1, 2, 0]], axis=2), axis=1)
+
+    def area(C):
+        return 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=1)
+
+    C0 = P0[cells0]
+    e = np.sort(np.linalg.norm(C0 - C0[:, [1, 2, 0]], axis=2), axis=1)
+    long_edges = (e >= 0.6 * e[:, 2:]).sum(axis=1)
+    assert {1, 2, 3} <= set(long_edges.tolist())  # caps, needles and well-shaped cells
+    # the children are appended in blocks; find each one's parent by containment
+    Ck = P[kids]
+    n_kids = np.zeros(len(cells0), np.int64)
+    got_area = np.zeros(len(cells0))
+    for ck, a in zip(Ck, area(Ck)):
+        inside = []
+        for p, cp in enumerate(C0):
+            # barycentric coordinates of the child's centroid and corners in the parent's plane
+            M = np.stack([cp[1] - cp[0], cp[2] - cp[0]], 1)
+            uv = np.linalg.lstsq(M, (np.vstack([ck, ck.mean(0)]) - cp[0]).T, rcond=None)[0]
+            res = np.linalg.norm(M @ uv - (np.vstack([ck, ck.mean(0)]) - cp[0]).T, axis=0)
+            if (uv >= -1e-9).all() and (uv.sum(0) <= 1 + 1e-9).all() and (res <= 1e-9).all():
+                inside.append(p)
+        assert len(inside) == 1, inside
+        p = inside[0]
+        n_kids[p] += 1
+        got_area[p] += a
+        assert longest(ck[None])[0] <= 0.8 * longest(C0[p:p + 1])[0] * (1 + 1e-12)
+    np.testing.assert_allclose(got_area, area(C0), rtol=1e-9)
+    np.testing.assert_array_equal(n_kids, np.array([0, 2, 3, 4])[long_edges])
+
+
+def test_the_bound_holds_on_slivers():
+    """On a mesh of needles and flat triangles the certified bound still holds against brute
+    force, and the cut cells still cover every triangle."""
+    V, F = _slivers()
+    Vo, Fo = V + np.array([0.0, 0.0, 0.001]) * np.sin(40 * V[:, :1]), F
+    d = directed(SurfaceIndex(Vo, Fo), surface_grid(V, F, 400), rounds=4)
+    c = certify(d, 1.02, 200_000)
+    assert c.certification["cells_cut"] > 100 and c.certification["open_cells"] == 0
+    dense = _dense_max((V, F), (Vo, Fo), 4000, seed=5)
+    assert dense <= c.bound * (1 + 1e-9)
+    assert c.max >= 0.98 * dense
+    st = c.state
+    P, cells = st["P"], st["cells"]
+    a = 0.5 * np.linalg.norm(np.cross(P[cells[:, 1]] - P[cells[:, 0]], P[cells[:, 2]] - P[cells[:, 0]]), axis=1)
+    C = V[F]
+    want = 0.5 * np.linalg.norm(np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]), axis=1)
+    np.testing.assert_allclose(np.bincount(st["ctri"], weights=a, minlength=len(F)), want, rtol=1e-9)

@@ -388,9 +388,11 @@ def _split(st: dict, index_y: SurfaceIndex, sel: np.ndarray, thin: bool = False)
     n_pts = len(allP)
     c = cells[sel]
     # edge k runs from corner k to corner k + 1; which are cut
-    e2 = np.stack([np.einsum("ij,ij->i", d, d) for d in
-                   (allP[c[:, 1]] - allP[c[:, 0]], allP[c[:, 2]] - allP[c[:, 1]], allP[c[:, 0]] - allP[c[:, 2]])], 1)
-    cut = e2 >= (_UNCUT * _UNCUT) * e2.max(axis=1, keepdims=True) if thin else np.ones((len(sel), 3), bool)
+    cut = np.ones((len(sel), 3), bool)
+    if thin:
+        e2 = np.stack([np.einsum("ij,ij->i", d, d) for d in
+                       (allP[c[:, 1]] - allP[c[:, 0]], allP[c[:, 2]] - allP[c[:, 1]], allP[c[:, 0]] - allP[c[:, 2]])], 1)
+        cut = e2 >= (_UNCUT * _UNCUT) * e2.max(axis=1, keepdims=True)
     ncut = cut.sum(axis=1)
     # turn the corners so the one cut edge is edge 0, or the one whole edge is edge 2
     r = np.zeros(len(sel), np.int64)

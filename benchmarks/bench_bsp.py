@@ -80,7 +80,7 @@ new, rec = stage(scene, cfg)
 sec, cpu = time.perf_counter() - t, time.process_time() - c0
 d = rec.details
 keep = ("splits", "kept_whole", "merged_triangles", "tree_depth", "record_depth", "records", "planes",
-        "lists", "bytes_per_triangle", "walk", "collapsed_input_triangles", "tolerance")
+        "lists", "bytes_per_triangle", "walk", "collapsed_input_triangles", "tolerance", "crossing")
 print(json.dumps({"triangles_in": scene.n_triangles, "triangles_out": new.n_triangles, "seconds": sec,
                   "cpu_seconds": cpu,
                   "calibration_seconds": cal, "details": {k: d[k] for k in keep if k in d}}))

@@ -296,6 +296,11 @@ def _bsp_section(report: dict) -> str:
             ("records", f"{sum(rec.values()):,} ({rec.get('split', 0) + rec.get('split_two_sided', 0):,} split, "
                         f"{rec.get('leaf', 0):,} leaf, {rec.get('peel', 0):,} peel); {d.get('planes', 0):,} planes"),
             ("list bytes", f"{_fmt_bytes(nbytes)} in project.json ({d.get('bytes_per_triangle', 0):.1f} per triangle)")]
+    cr = d.get("crossing") or {}
+    if cr.get("pairs"):
+        rows.append(("parts through each other", f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} "
+                                                 f"triangles in {cr['parts']} parts): one of each pair is cut, "
+                                                 "whatever the tree"))
     if w:
         rows.append(("one frame's walk", f"from the reader's starting eye: {w['plane_tests']:,} plane tests, "
                                          f"{w['ranges']:,} ranges of {w['triangles']:,} triangles "

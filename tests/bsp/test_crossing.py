@@ -1,0 +1,154 @@
+"""Parts that pass through each other (bake/bsp/crossing.py): the pairs it finds against a brute
+force over every pair of triangles, and what the BSP stage says about them."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from bake import config
+from bake.bsp import crossing
+from bake.bsp.stage import stage
+from bake.scene import make_scene
+
+from .meshes import box, corpus_file, load_scene
+
+
+def _rotation(seed: int) -> np.ndarray:
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def _boxes(*specs, seed: int = 0):
+    """Boxes (lo, hi) in one mesh, each with its own corners (not welded), turned together."""
+    V, F = [], []
+    for lo, hi in specs:
+        v, f = box(lo, hi)
+        F.append(f + sum(len(x) for x in V))
+        V.append(v)
+    return np.concatenate(V) @ _rotation(seed).T, np.concatenate(F)
+
+
+def _segment_through(p, q, a, b, c) -> bool:
+    """Reference: does the open segment pq pass through the open triangle abc? Solved for the
+    segment's and the triangle's parameters (p + s (q - p) = a + u (b - a) + v (c - a))."""
+    M = np.column_stack([q - p, a - b, a - c])
+    if abs(np.linalg.det(M)) < 1e-12 * np.linalg.norm(q - p) * np.linalg.norm(b - a) * np.linalg.norm(c - a):
+        return False  # parallel to the plane: touching at most
+    s, u, v = np.linalg.solve(M, a - p)
+    m = 1e-9
+    return m < s < 1 - m and u > m and v > m and u + v < 1 - m
+
+
+def brute_pairs(V, F) -> set[tuple[int, int]]:
+    """Every pair of triangles sharing no corner position, one edge of either through the other."""
+    key = [tuple(map(tuple, V[f])) for f in F]
+    out = set()
+    for i, j in itertools.combinations(range(len(F)), 2):
+        if set(key[i]) & set(key[j]):
+            continue
+        A, B = V[F[i]], V[F[j]]
+        if any(_segment_through(E[k], E[(k + 1) % 3], *T) for E, T in ((A, B), (B, A)) for k in range(3)):
+            out.add((i, j))
+    return out
+
+
+CASES = {
+    # each box's faces run through the other's
+    "through": [((0, 0, 0), (1, 1, 1)), ((0.5, 0.3, 0.2), (1.5, 1.3, 1.2))],
+    # a thin slab through a box: its long faces cross the box's side faces
+    "slab": [((0, 0, 0), (1, 1, 1)), ((-0.5, 0.4, 0.2), (1.5, 0.6, 0.8))],
+    # one box on another (faces touching in a plane), one apart, one inside another
+    "touching": [((0, 0, 0), (1, 1, 1)), ((0.2, 0.2, 1), (0.8, 0.8, 1.5))],
+    "apart": [((0, 0, 0), (1, 1, 1)), ((2, 0, 0), (3, 1, 1))],
+    "nested": [((0, 0, 0), (1, 1, 1)), ((0.25, 0.25, 0.25), (0.75, 0.75, 0.75))],
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("prefilter", [True, False])
+def test_pairs_are_those_a_brute_force_finds(case, seed, prefilter, monkeypatch):
+    """With MeshLab's selection of faces to test, and without it (every face: what the stage
+    does if MeshLab fails)."""
+    if not prefilter:
+        monkeypatch.setattr(crossing, "_selected", lambda V, F, live: live)
+    V, F = _boxes(*CASES[case], seed=seed)
+    got = crossing.crossing_pairs(V, F, 1e-9)
+    ref = brute_pairs(V, F)
+    assert set(map(tuple, got.tolist())) == ref
+    if case in ("through", "slab"):
+        assert len(ref) > 0
+    else:
+        assert len(ref) == 0
+    assert (got[:, 0] < got[:, 1]).all()
+
+
+def test_within_the_tolerance_nothing_crosses():
+    """A box sunk 1e-4 into another crosses it; with a tolerance above that, it only touches."""
+    V, F = _boxes(((0, 0, 0), (1, 1, 1)), ((0.2, 0.2, 1 - 1e-4), (0.8, 0.8, 1.5)))
+    assert len(crossing.crossing_pairs(V, F, 1e-6)) > 0
+    assert len(crossing.crossing_pairs(V, F, 1e-3)) == 0
+
+
+def test_parts_join_by_edges_at_one_position():
+    V, F = _boxes(((0, 0, 0), (1, 1, 1)), ((2, 0, 0), (3, 1, 1)))
+    # every triangle its own corners: the positions still join each box into one part
+    U = V[F].reshape(-1, 3)
+    G = np.arange(len(U)).reshape(-1, 3)
+    lab = crossing.parts(U, G)
+    assert lab.tolist() == [0] * 12 + [1] * 12
+    # two triangles that share one corner only are two parts
+    V2 = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    assert crossing.parts(V2, np.array([[0, 1, 2], [0, 3, 4]])).tolist() == [0, 1]
+
+
+def _stage(V, F):
+    scene = make_scene(V, F)
+    return stage(scene, config.load(None, ["bsp.enabled=true"]).bsp)
+
+
+def test_the_stage_counts_crossing_pairs_and_says_what_they_cost():
+    V, F = _boxes(*CASES["through"])
+    _, rec = _stage(V, F)
+    cr = rec.details["crossing"]
+    ref = brute_pairs(V, F)
+    assert cr["pairs"] == len(ref) > 0
+    assert cr["triangles"] == len({t for p in ref for t in p})
+    assert cr["parts"] == 2 and cr["pairs_within_one_part"] == 0
+    assert any("pass through each other" in w and f"{len(ref):,} pair" in w for w in rec.warnings)
+    V, F = _boxes(*CASES["apart"])
+    _, rec = _stage(V, F)
+    assert rec.details["crossing"]["pairs"] == 0
+    assert not any("pass through each other" in w for w in rec.warnings)
+
+
+def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses():
+    """The corpus Suzanne (docs/formats-bsp.md, Known limits): every pair is an eye's triangle
+    against the head's, found among all 468,028 pairs (no prefilter) as among MeshLab's
+    selection."""
+    path = corpus_file("suzanne")
+    if not path.is_file():
+        pytest.skip(f"corpus missing: {path}")
+    s = load_scene("suzanne")
+    V, F = s.positions, s.triangles
+    tol = 2e-5 * s.scale()
+    got = crossing.crossing_pairs(V, F, tol)
+    # every pair of triangles that share no corner position, tested with the same check
+    i, j = np.triu_indices(len(F), 1)
+    _, vid = np.unique(V, axis=0, return_inverse=True)
+    K = vid.reshape(-1)[F]
+    apart = ~(K[i][:, :, None] == K[j][:, None, :]).any(axis=(1, 2))
+    i, j = i[apart], j[apart]
+    C = V[F]
+    hit = crossing._edge_through(C[i], C[j], tol) | crossing._edge_through(C[j], C[i], tol)
+    assert got.tolist() == np.stack([i[hit], j[hit]], 1).tolist()
+    lab = crossing.parts(V, F)
+    sizes = np.bincount(lab)
+    assert sorted(sizes.tolist())[:2] == [56, 56]  # the eyes
+    eyes = np.flatnonzero(sizes == 56)
+    pair_parts = lab[got]
+    assert len(got) > 50
+    assert (np.isin(pair_parts, eyes).sum(axis=1) == 1).all()  # an eye's against the head's

@@ -71,9 +71,11 @@ CASES = {
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("prefilter", [True, False])
 def test_pairs_are_those_a_brute_force_finds(case, seed, prefilter, monkeypatch):
-    """With MeshLab's selection of faces to test, and without it (every face: what the stage
-    does if MeshLab fails)."""
-    if not prefilter:
+    """With MeshLab's selection of faces to test (forced: meshes this small skip it), and without
+    it (every face: what the stage does below 1,500 triangles or if MeshLab fails)."""
+    if prefilter:
+        monkeypatch.setattr(crossing, "_PREFILTER_FROM", 0)
+    else:
         monkeypatch.setattr(crossing, "_selected", lambda V, F, live: live)
     V, F = _boxes(*CASES[case], seed=seed)
     got = crossing.crossing_pairs(V, F, 1e-9)
@@ -125,10 +127,11 @@ def test_the_stage_counts_crossing_pairs_and_says_what_they_cost():
     assert not any("pass through each other" in w for w in rec.warnings)
 
 
-def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses():
+def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses(monkeypatch):
     """The corpus Suzanne (docs/formats-bsp.md, Known limits): every pair is an eye's triangle
-    against the head's, found among all 468,028 pairs (no prefilter) as among MeshLab's
-    selection."""
+    against the head's, found among MeshLab's selection (forced: the stage tests every face of a
+    mesh this small) as among all 468,028 pairs."""
+    monkeypatch.setattr(crossing, "_PREFILTER_FROM", 0)
     path = corpus_file("suzanne")
     if not path.is_file():
         pytest.skip(f"corpus missing: {path}")

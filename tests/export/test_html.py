@@ -141,6 +141,17 @@ def test_report_html_written_self_contained_and_every_image_decodes(baked):
     assert "http://" not in page and "https://" not in page and "<script" not in page
 
 
+def test_the_bsp_table_says_which_triangles_pass_through_each_other(baked):
+    """The red and blue boxes interpenetrate: the BSP's record counts the crossing pairs, and
+    report.html's BSP table says so; the floor and the magenta box cross nothing."""
+    _, out = baked
+    rep = json.loads((out / "report.json").read_text())
+    cr = next(st for st in rep["stages"] if st["name"] == "bsp")["details"]["crossing"]
+    assert cr["pairs"] > 0 and cr["parts"] == 2 and cr["pairs_within_one_part"] == 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} triangles in 2 parts)" in page
+
+
 def test_stage_table_counts_faces_and_reads_distances_as_percent(baked):
     """Import and transform see polygons (no triangles yet): the table says so instead of 0;
     Hausdorff distances (fractions of the diagonal in report.json) read as a percentage."""

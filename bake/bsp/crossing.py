@@ -1,19 +1,21 @@
 """Triangles that pass through each other: where a painter's order must cut, whatever the tree.
 
-Two triangles *cross* when an edge of one passes through the other's inside: its ends lie on
-opposite sides of the other's plane, each more than the tolerance off it, at a point more than
-the tolerance inside the other's edges. Then each triangle has parts strictly in front of and
-behind the other's plane, each may hide the other (bake/bsp/build.py's "may hide" relation both
-ways), and no order of the two whole triangles is right from every eye: one of them is cut.
-Triangles that share a corner (by position) are never a pair; triangles that only touch, or
-pass within the tolerance, are not either.
+Two triangles *cross* when an edge of one passes through the other's inside (its ends on
+opposite sides of the other's plane, each more than the tolerance off it, meeting the plane more
+than the tolerance inside the other's edges) and each has corners more than the tolerance on
+both sides of the other's plane. Then each has parts strictly in front of and behind the other's
+plane, each may hide the other (bake/bsp/build.py's "may hide" relation both ways, at the same
+tolerance), and no order of the two whole triangles is right from every eye: one of them is cut
+(the tree keeps a fragment whole only where a piece would be a sliver below ``min_area`` or
+would collapse on the written grid). Triangles that share a corner (by position) are never a
+pair; triangles that only touch, or pass within the tolerance, are not either.
 
-Which faces to test comes, in meshes of 1,500 triangles or more, from MeshLab's per-face
-self-intersection selection (``compute_selection_by_self_intersections_per_face``, compiled,
-0.4 s for 69k triangles): it selects every face that intersects another it shares no vertex
-with, so a superset of the faces in crossing pairs (tests/bsp/test_crossing.py checks the same
-pairs come out without it). The pairs among the faces to test are found with a sweep of their
-boxes along x and checked here in float64 with the tree's tolerance.
+The pairs to check come from a uniform grid over the faces' boxes (cells the size of the median
+box; a face spanning more than ``_MAX_CELLS`` cells is paired by its box with every face, in
+blocks), so the work follows the faces' sizes and not the scene's extent (a far-off floor does
+not crowd the model into a few cells), and every temporary array is kept under ``_CHUNK``
+entries. A pair is kept only if the two boxes overlap, the two triangles straddle each other's
+planes, and an edge passes through; all in float64, vectorised.
 
 The BSP stage reports the count (``crossing`` in its record) and a warning: parts modelled to
 pass through each other (eyes sunk into a head, walls through walls) cost cuts that parts that
@@ -26,34 +28,104 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-_BLOCK = 512  # faces per block of the box sweep
-# below this many triangles every face goes to the sweep (Suzanne's 968: 0.06 s), which is
-# cheaper than loading MeshLab (about 0.2 s); above, MeshLab's selection first (the 69k bunny:
-# 0.4 s against 6.7 s for every face)
-_PREFILTER_FROM = 1500
+_MAX_CELLS = 64  # a face over more grid cells than this is paired by boxes (see the docstring)
+_CHUNK = 1 << 22  # entries per temporary array (pairs, or boxes compared)
+
+
+def _overlap(lo: np.ndarray, hi: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return ((lo[a] <= hi[b]) & (lo[b] <= hi[a])).all(axis=1)
+
+
+def _pairs_in_groups(key: np.ndarray, face: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    """Pairs of faces that share a key (a grid cell) and whose boxes overlap; entries sorted by
+    key. Generated a run of entries at a time, at most about _CHUNK pairs each."""
+    n = len(key)
+    if n < 2:
+        return []
+    brk = np.flatnonzero(key[1:] != key[:-1]) + 1
+    end = np.repeat(np.concatenate([brk, [n]]), np.diff(np.concatenate([[0], brk, [n]])))
+    after = end - np.arange(n) - 1  # partners after each entry in its cell
+    out = []
+    cum = np.cumsum(after)
+    s = 0
+    while s < n:
+        # entries s .. e-1: about _CHUNK pairs (at least one entry)
+        e = max(s + 1, int(np.searchsorted(cum, (cum[s - 1] if s else 0) + _CHUNK, side="right")))
+        e = min(e, n)
+        cnt = after[s:e]
+        tot = int(cnt.sum())
+        if tot:
+            i = np.repeat(np.arange(s, e), cnt)
+            j = i + 1 + (np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            a, b = face[i], face[j]
+            keep = (a != b) & _overlap(lo, hi, a, b)
+            out.append(np.stack([np.minimum(a, b)[keep], np.maximum(a, b)[keep]], axis=1))
+        s = e
+    return out
 
 
 def _candidate_pairs(lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
-    """(k, 2) index pairs (a < b) whose boxes ``lo``/``hi`` overlap (grown by ``tol``): a sweep
-    along x, a block of boxes at a time against the boxes that start before the block's last
-    end."""
+    """(k, 2) index pairs (a < b, unique, sorted) whose boxes ``lo``/``hi`` overlap once grown by
+    ``tol``."""
+    lo = np.asarray(lo, np.float64) - tol
+    hi = np.asarray(hi, np.float64) + tol
     n = len(lo)
-    o = np.argsort(lo[:, 0], kind="stable")
-    lo_s, hi_s = lo[o], hi[o]
+    if n < 2:
+        return np.zeros((0, 2), np.int64)
+    ext = (hi - lo).max(axis=1)
+    h = float(np.median(ext))
+    if not h > 0:
+        h = float(ext.max()) or 1.0
+    origin = lo.min(axis=0)
+    i0 = np.floor((lo - origin) / h)
+    i1 = np.floor((hi - origin) / h)
+    span = i1 - i0 + 1
+    big = span.prod(axis=1) > _MAX_CELLS
     out = []
-    for s in range(0, n, _BLOCK):
-        e = min(n, s + _BLOCK)
-        stop = int(np.searchsorted(lo_s[:, 0], hi_s[s:e, 0].max() + tol, side="right"))
-        a = np.arange(s, e)
-        b = np.arange(s, max(stop, e))
-        ov = ((lo_s[a][:, None, :] <= hi_s[b][None, :, :] + tol) &
-              (lo_s[b][None, :, :] <= hi_s[a][:, None, :] + tol)).all(axis=2)
-        ia, ib = np.nonzero(ov)
-        ia, ib = a[ia], b[ib]
-        keep = ia < ib
-        out.append(np.stack([o[ia[keep]], o[ib[keep]]], axis=1))
-    P = np.concatenate(out) if out else np.zeros((0, 2), np.int64)
-    return np.sort(P, axis=1)
+    # faces over a few cells: one entry per cell, pairs within each cell
+    small = np.flatnonzero(~big)
+    if len(small):
+        sp = span[small].astype(np.int64)
+        cnt = sp.prod(axis=1)
+        face = np.repeat(small, cnt)
+        k = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        spf = np.repeat(sp, cnt, axis=0)
+        base = np.repeat(i0[small].astype(np.int64), cnt, axis=0)
+        cell = base + np.stack([k % spf[:, 0], (k // spf[:, 0]) % spf[:, 1], k // (spf[:, 0] * spf[:, 1])], axis=1)
+        dims = cell.max(axis=0) + 1
+        if float(dims[0]) * float(dims[1]) * float(dims[2]) < 2.0 ** 62:
+            key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+        else:  # a grid too large for one int64 key: number the cells
+            key = np.unique(cell, axis=0, return_inverse=True)[1].reshape(-1)
+        o = np.argsort(key, kind="stable")  # (entries come in face order: kept within a cell)
+        out += _pairs_in_groups(key[o], face[o], lo, hi)
+    # faces over many cells: against every face by boxes, a block of them at a time
+    bigs = np.flatnonzero(big)
+    if len(bigs):
+        rows = max(1, _CHUNK // n)
+        every = np.arange(n)
+        for s in range(0, len(bigs), rows):
+            a = bigs[s:s + rows]
+            ov = ((lo[a][:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[a][:, None, :])).all(axis=2)
+            ia, ib = np.nonzero(ov)
+            ia, ib = a[ia], every[ib]
+            keep = ia != ib
+            out.append(np.stack([np.minimum(ia, ib)[keep], np.maximum(ia, ib)[keep]], axis=1))
+    if not out:
+        return np.zeros((0, 2), np.int64)
+    P = np.concatenate(out)
+    u = np.sort(P[:, 0] * np.int64(n) + P[:, 1])
+    u = u[np.concatenate([[True], u[1:] != u[:-1]])] if len(u) else u
+    return np.stack([u // n, u % n], axis=1)
+
+
+def _straddles(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
+    """Per pair: has triangle ``E[i]`` corners more than ``tol`` on both sides of ``T[i]``'s plane?"""
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    ln = np.linalg.norm(n, axis=1)
+    n = n / np.where(ln > 0, ln, 1.0)[:, None]
+    d = np.einsum("ikj,ij->ik", E - T[:, :1], n)
+    return (ln > 0) & (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
 
 
 def _edge_through(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
@@ -80,23 +152,9 @@ def _edge_through(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
     return hit
 
 
-def _selected(V: np.ndarray, F: np.ndarray, live: np.ndarray) -> np.ndarray:
-    """The faces ``live`` that MeshLab finds intersecting a face they share no vertex with;
-    all of them if MeshLab fails on the mesh (the selection only saves time)."""
-    try:
-        import pymeshlab
-
-        ms = pymeshlab.MeshSet()
-        ms.add_mesh(pymeshlab.Mesh(vertex_matrix=V, face_matrix=F[live].astype(np.int32)))
-        ms.compute_selection_by_self_intersections_per_face()
-        return live[np.flatnonzero(ms.current_mesh().face_selection_array())]
-    except Exception:  # noqa: BLE001 -- any failure of the library: test every face instead
-        return live
-
-
 def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float) -> np.ndarray:
-    """(k, 2) sorted pairs of triangle ids (rows sorted) that cross (module docstring); ``tol``
-    in the units of ``V``."""
+    """(k, 2) pairs of triangle ids (each row sorted, rows sorted) that cross (module
+    docstring); ``tol`` in the units of ``V``."""
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64).reshape(-1, 3)
     none = np.zeros((0, 2), np.int64)
@@ -107,22 +165,23 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float) -> np.ndarray:
     live = np.flatnonzero(area2 > 0)  # a triangle with no area crosses nothing
     if len(live) < 2:
         return none
-    sel = live if len(live) < _PREFILTER_FROM else _selected(V, F, live)
-    if len(sel) < 2:
-        return none
-    Cs = C[sel]
-    P = _candidate_pairs(Cs.min(axis=1), Cs.max(axis=1), tol)
+    Cl = C[live]
+    P = _candidate_pairs(Cl.min(axis=1), Cl.max(axis=1), tol)
     if len(P) == 0:
         return none
     # corners shared by position
     _, vid = np.unique(V, axis=0, return_inverse=True)
-    K = vid.reshape(-1)[F[sel]]
-    share = (K[P[:, 0]][:, :, None] == K[P[:, 1]][:, None, :]).any(axis=(1, 2))
-    P = P[~share]
-    A, B = Cs[P[:, 0]], Cs[P[:, 1]]
-    hit = _edge_through(A, B, tol) | _edge_through(B, A, tol)
-    out = sel[P[hit]]
-    out = np.sort(out, axis=1)
+    K = vid.reshape(-1)[F[live]]
+    found = []
+    for s in range(0, len(P), _CHUNK // 16):
+        Q = P[s:s + _CHUNK // 16]
+        Q = Q[~(K[Q[:, 0]][:, :, None] == K[Q[:, 1]][:, None, :]).any(axis=(1, 2))]
+        A, B = Cl[Q[:, 0]], Cl[Q[:, 1]]
+        both = _straddles(A, B, tol) & _straddles(B, A, tol)
+        Q, A, B = Q[both], A[both], B[both]
+        hit = _edge_through(A, B, tol) | _edge_through(B, A, tol)
+        found.append(live[Q[hit]])
+    out = np.sort(np.concatenate(found), axis=1)
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 

@@ -299,7 +299,7 @@ def _bsp_section(report: dict) -> str:
     cr = d.get("crossing") or {}
     if cr.get("pairs"):
         rows.append(("parts through each other", f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} "
-                                                 f"triangles in {cr['parts']} parts): one of each pair is cut, "
+                                                 f"triangles in {cr['parts']} part(s)): one of each pair is cut, "
                                                  "whatever the tree"))
     if w:
         rows.append(("one frame's walk", f"from the reader's starting eye: {w['plane_tests']:,} plane tests, "

@@ -69,14 +69,7 @@ CASES = {
 
 @pytest.mark.parametrize("case", sorted(CASES))
 @pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("prefilter", [True, False])
-def test_pairs_are_those_a_brute_force_finds(case, seed, prefilter, monkeypatch):
-    """With MeshLab's selection of faces to test (forced: meshes this small skip it), and without
-    it (every face: what the stage does below 1,500 triangles or if MeshLab fails)."""
-    if prefilter:
-        monkeypatch.setattr(crossing, "_PREFILTER_FROM", 0)
-    else:
-        monkeypatch.setattr(crossing, "_selected", lambda V, F, live: live)
+def test_pairs_are_those_a_brute_force_finds(case, seed):
     V, F = _boxes(*CASES[case], seed=seed)
     got = crossing.crossing_pairs(V, F, 1e-9)
     ref = brute_pairs(V, F)
@@ -86,6 +79,62 @@ def test_pairs_are_those_a_brute_force_finds(case, seed, prefilter, monkeypatch)
     else:
         assert len(ref) == 0
     assert (got[:, 0] < got[:, 1]).all()
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e4])
+def test_random_soups_against_the_brute_force(scale):
+    """Triangles thrown into a cube (many cross), some of them long, one far away: the grid's
+    pairs and checks against every pair solved one by one."""
+    rng = np.random.default_rng(int(scale * 7) % 1000)
+    c = rng.random((150, 1, 3))
+    size = np.where(rng.random((150, 1, 1)) < 0.1, 0.8, 0.3)
+    T = c + size * (rng.random((150, 3, 3)) - 0.5)
+    T = np.concatenate([T, [[[40, 40, 40], [41, 40, 40], [40, 41, 40]]]])  # far away
+    V = T.reshape(-1, 3) * scale
+    F = np.arange(len(V)).reshape(-1, 3)
+    got = crossing.crossing_pairs(V, F, 1e-9 * scale)
+    ref = brute_pairs(V, F)
+    assert len(ref) > 20
+    assert set(map(tuple, got.tolist())) == ref
+
+
+def test_candidate_pairs_are_every_overlapping_box_pair_once():
+    """The grid's box pairs against all pairs of boxes: across grid cells and chunks, with equal
+    lower corners, boxes much bigger than the median, and one far off."""
+    rng = np.random.default_rng(5)
+    n = 1100
+    lo = np.round(rng.random((n, 3)) * 4, 1)  # many equal lower corners
+    ext = rng.random((n, 3)) * 0.2
+    ext[rng.random(n) < 0.03] *= 30  # boxes over many cells
+    lo[0] = 500.0  # far off
+    hi = lo + ext
+    for tol in (0.0, 0.05):
+        got = crossing._candidate_pairs(lo, hi, tol)
+        i, j = np.triu_indices(n, 1)
+        ov = ((lo[i] <= hi[j] + 2 * tol) & (lo[j] <= hi[i] + 2 * tol)).all(axis=1)
+        assert got.tolist() == np.stack([i[ov], j[ov]], 1).tolist()
+    # small chunks: the same pairs
+    import bake.bsp.crossing as mod
+
+    keep = mod._CHUNK
+    try:
+        mod._CHUNK = 1000
+        assert crossing._candidate_pairs(lo, hi, 0.05).tolist() == got.tolist()
+    finally:
+        mod._CHUNK = keep
+
+
+def test_a_pierced_face_within_the_tolerance_of_the_other_plane_is_no_pair():
+    """A big triangle tilted 1e-4 through a small flat one: an edge of the big one passes
+    through the small one, but the small one lies within the tolerance of the big one's plane,
+    so neither hides the other at that tolerance and the tree needs no cut (a reviewer's case)."""
+    V = np.array([[-1, 0, -1e-4], [1, 0, 1e-4], [0, 1, 0], [-0.01, -0.01, 0], [0.01, -0.01, 0], [0, 0.01, 0]])
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    assert len(crossing.crossing_pairs(V, F, 1e-9)) == 1  # it does cross
+    tol = 1e-6 * np.linalg.norm(V.max(0) - V.min(0))
+    assert len(crossing.crossing_pairs(V, F, tol)) == 0
+    new, rec = _stage(V, F)
+    assert rec.details["splits"] == 0 and rec.details["crossing"]["pairs"] == 0
 
 
 def test_within_the_tolerance_nothing_crosses():
@@ -127,11 +176,9 @@ def test_the_stage_counts_crossing_pairs_and_says_what_they_cost():
     assert not any("pass through each other" in w for w in rec.warnings)
 
 
-def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses(monkeypatch):
+def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses():
     """The corpus Suzanne (docs/formats-bsp.md, Known limits): every pair is an eye's triangle
-    against the head's, found among MeshLab's selection (forced: the stage tests every face of a
-    mesh this small) as among all 468,028 pairs."""
-    monkeypatch.setattr(crossing, "_PREFILTER_FROM", 0)
+    against the head's, the grid's pairs the same as all 468,028 pairs checked."""
     path = corpus_file("suzanne")
     if not path.is_file():
         pytest.skip(f"corpus missing: {path}")
@@ -146,7 +193,8 @@ def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses(monkeypatch):
     apart = ~(K[i][:, :, None] == K[j][:, None, :]).any(axis=(1, 2))
     i, j = i[apart], j[apart]
     C = V[F]
-    hit = crossing._edge_through(C[i], C[j], tol) | crossing._edge_through(C[j], C[i], tol)
+    hit = crossing._straddles(C[i], C[j], tol) & crossing._straddles(C[j], C[i], tol) & \
+        (crossing._edge_through(C[i], C[j], tol) | crossing._edge_through(C[j], C[i], tol))
     assert got.tolist() == np.stack([i[hit], j[hit]], 1).tolist()
     lab = crossing.parts(V, F)
     sizes = np.bincount(lab)

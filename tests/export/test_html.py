@@ -149,7 +149,7 @@ def test_the_bsp_table_says_which_triangles_pass_through_each_other(baked):
     cr = next(st for st in rep["stages"] if st["name"] == "bsp")["details"]["crossing"]
     assert cr["pairs"] > 0 and cr["parts"] == 2 and cr["pairs_within_one_part"] == 0
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} triangles in 2 parts)" in page
+    assert f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} triangles in 2 part(s))" in page
 
 
 def test_stage_table_counts_faces_and_reads_distances_as_percent(baked):

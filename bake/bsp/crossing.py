@@ -13,8 +13,8 @@ pair; triangles that only touch, or pass within the tolerance, are not either.
 The pairs to check come from a uniform grid over the faces' boxes (cells the size of the median
 box; a face spanning more than ``_MAX_CELLS`` cells is paired by its box with every face, in
 blocks), so the work follows the faces' sizes and not the scene's extent (a far-off floor does
-not crowd the model into a few cells), and every temporary array is kept under ``_CHUNK``
-entries. A pair is kept only if the two boxes overlap, the two triangles straddle each other's
+not crowd the model into a few cells), and the pairs and the box comparisons are made in chunks
+of at most ``_CHUNK`` entries. A pair is kept only if the two boxes overlap, the two triangles straddle each other's
 planes, and an edge passes through; all in float64, vectorised.
 
 The BSP stage reports the count (``crossing`` in its record) and a warning: parts modelled to
@@ -119,31 +119,33 @@ def _candidate_pairs(lo: np.ndarray, hi: np.ndarray, tol: float) -> np.ndarray:
     return np.stack([u // n, u % n], axis=1)
 
 
-def _straddles(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
-    """Per pair: has triangle ``E[i]`` corners more than ``tol`` on both sides of ``T[i]``'s plane?"""
+def _unit_normals(T: np.ndarray) -> np.ndarray:
+    """Unit normals of the triangles ``T`` (k, 3, 3); zero for a triangle with no area (it then
+    straddles nothing and nothing passes through it)."""
     n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
     ln = np.linalg.norm(n, axis=1)
-    n = n / np.where(ln > 0, ln, 1.0)[:, None]
-    d = np.einsum("ikj,ij->ik", E - T[:, :1], n)
-    return (ln > 0) & (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
+    return n / np.where(ln > 0, ln, np.inf)[:, None]
 
 
-def _edge_through(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
-    """Per pair: does an edge of triangle ``E[i]`` pass through the inside of ``T[i]``
-    (``(k, 3, 3)`` corners each), by more than ``tol`` on every side?"""
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    ln = np.linalg.norm(n, axis=1)
-    ok_t = ln > 0
-    n = n / np.where(ok_t, ln, 1.0)[:, None]
+def _straddles(T: np.ndarray, nT: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
+    """Per pair: has triangle ``E[i]`` corners more than ``tol`` on both sides of ``T[i]``'s
+    plane (unit normal ``nT[i]``)?"""
+    d = np.einsum("ikj,ij->ik", E - T[:, :1], nT)
+    return (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
+
+
+def _edge_through(T: np.ndarray, nT: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
+    """Per pair: does an edge of triangle ``E[i]`` pass through the inside of ``T[i]`` (unit
+    normal ``nT[i]``), by more than ``tol`` on every side?"""
     # inward normals of T's edges, in its plane
-    en = [np.cross(n, T[:, (u + 1) % 3] - T[:, u]) for u in range(3)]
+    en = [np.cross(nT, T[:, (u + 1) % 3] - T[:, u]) for u in range(3)]
     en = [x / np.maximum(np.linalg.norm(x, axis=1), 1e-300)[:, None] for x in en]
     hit = np.zeros(len(T), bool)
     for k in range(3):
         p, q = E[:, k], E[:, (k + 1) % 3]
-        dp = np.einsum("ij,ij->i", p - T[:, 0], n)
-        dq = np.einsum("ij,ij->i", q - T[:, 0], n)
-        through = ok_t & (((dp > tol) & (dq < -tol)) | ((dp < -tol) & (dq > tol)))
+        dp = np.einsum("ij,ij->i", p - T[:, 0], nT)
+        dq = np.einsum("ij,ij->i", q - T[:, 0], nT)
+        through = ((dp > tol) & (dq < -tol)) | ((dp < -tol) & (dq > tol))
         t = np.where(through, dp / np.where(through, dp - dq, 1.0), 0.0)
         X = p + t[:, None] * (q - p)
         for u in range(3):
@@ -152,9 +154,24 @@ def _edge_through(T: np.ndarray, E: np.ndarray, tol: float) -> np.ndarray:
     return hit
 
 
-def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float) -> np.ndarray:
+def _crosses(A: np.ndarray, B: np.ndarray, tol: float) -> np.ndarray:
+    """Per pair of triangles (``(k, 3, 3)`` corners each): do they cross (module docstring)?"""
+    nA, nB = _unit_normals(A), _unit_normals(B)
+    both = _straddles(A, nA, B, tol) & _straddles(B, nB, A, tol)
+    i = np.flatnonzero(both)
+    hit = np.zeros(len(A), bool)
+    hit[i] = _edge_through(A[i], nA[i], B[i], tol) | _edge_through(B[i], nB[i], A[i], tol)
+    return hit
+
+
+def _position_ids(V: np.ndarray) -> np.ndarray:
+    """Per vertex, an id shared by the vertices at the same position."""
+    return np.unique(np.asarray(V, np.float64), axis=0, return_inverse=True)[1].reshape(-1)
+
+
+def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float, ids: np.ndarray | None = None) -> np.ndarray:
     """(k, 2) pairs of triangle ids (each row sorted, rows sorted) that cross (module
-    docstring); ``tol`` in the units of ``V``."""
+    docstring); ``tol`` in the units of ``V``; ``ids``: :func:`_position_ids` of ``V`` if known."""
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64).reshape(-1, 3)
     none = np.zeros((0, 2), np.int64)
@@ -170,30 +187,25 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float) -> np.ndarray:
     if len(P) == 0:
         return none
     # corners shared by position
-    _, vid = np.unique(V, axis=0, return_inverse=True)
-    K = vid.reshape(-1)[F[live]]
+    K = (_position_ids(V) if ids is None else ids)[F[live]]
     found = []
     for s in range(0, len(P), _CHUNK // 16):
         Q = P[s:s + _CHUNK // 16]
         Q = Q[~(K[Q[:, 0]][:, :, None] == K[Q[:, 1]][:, None, :]).any(axis=(1, 2))]
-        A, B = Cl[Q[:, 0]], Cl[Q[:, 1]]
-        both = _straddles(A, B, tol) & _straddles(B, A, tol)
-        Q, A, B = Q[both], A[both], B[both]
-        hit = _edge_through(A, B, tol) | _edge_through(B, A, tol)
-        found.append(live[Q[hit]])
+        found.append(live[Q[_crosses(Cl[Q[:, 0]], Cl[Q[:, 1]], tol)]])
     out = np.sort(np.concatenate(found), axis=1)
     return out[np.lexsort((out[:, 1], out[:, 0]))]
 
 
-def parts(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def parts(V: np.ndarray, F: np.ndarray, ids: np.ndarray | None = None) -> np.ndarray:
     """Per triangle, its connected part (triangles joined through edges whose ends are at the
-    same positions), numbered from 0 in order of each part's first triangle."""
+    same positions), numbered from 0 in order of each part's first triangle; ``ids``:
+    :func:`_position_ids` of ``V`` if known."""
     F = np.asarray(F, np.int64).reshape(-1, 3)
     T = len(F)
     if T == 0:
         return np.zeros(0, np.int64)
-    _, vid = np.unique(np.asarray(V, np.float64), axis=0, return_inverse=True)
-    K = vid.reshape(-1)[F]
+    K = (_position_ids(V) if ids is None else ids)[F]
     e = np.sort(np.concatenate([K[:, [0, 1]], K[:, [1, 2]], K[:, [2, 0]]]), axis=1)
     tri = np.tile(np.arange(T), 3)
     o = np.lexsort((tri, e[:, 1], e[:, 0]))
@@ -210,10 +222,11 @@ def parts(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 def summary(V: np.ndarray, F: np.ndarray, tol: float) -> dict:
     """The record's ``crossing`` figures: pairs, the triangles in them, the connected parts
     they lie in, and how many pairs lie within one part (a surface through itself)."""
-    P = crossing_pairs(V, F, tol)
+    ids = _position_ids(V)
+    P = crossing_pairs(V, F, tol, ids)
     if len(P) == 0:
         return {"pairs": 0, "triangles": 0, "parts": 0, "pairs_within_one_part": 0}
-    lab = parts(V, F)
+    lab = parts(V, F, ids)
     return {"pairs": int(len(P)), "triangles": int(len(np.unique(P))),
             "parts": int(len(np.unique(lab[P]))),
             "pairs_within_one_part": int((lab[P[:, 0]] == lab[P[:, 1]]).sum())}

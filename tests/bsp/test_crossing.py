@@ -193,8 +193,7 @@ def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses():
     apart = ~(K[i][:, :, None] == K[j][:, None, :]).any(axis=(1, 2))
     i, j = i[apart], j[apart]
     C = V[F]
-    hit = crossing._straddles(C[i], C[j], tol) & crossing._straddles(C[j], C[i], tol) & \
-        (crossing._edge_through(C[i], C[j], tol) | crossing._edge_through(C[j], C[i], tol))
+    hit = crossing._crosses(C[i], C[j], tol)
     assert got.tolist() == np.stack([i[hit], j[hit]], 1).tolist()
     lab = crossing.parts(V, F)
     sizes = np.bincount(lab)

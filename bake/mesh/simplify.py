@@ -856,7 +856,8 @@ def _peak_rounds(ctx: _Ctx, out: _Out, h: HausdorffResult, whole, target: int, d
     which moving corners cannot put back: the input vertex closest to each is locked (with
     those of the rounds before) and the whole stage runs again (library, repairs, fit, refine
     rounds). A round's result is kept if its measured max is lower, with no more defects and
-    folds (teapot at 10%: 0.988% -> 0.531% of the diagonal)."""
+    folds (teapot at 10%: 0.988% -> 0.531% of the diagonal); a round whose result has flipped
+    triangles or new non-manifold edges after the fit is neither measured nor refined."""
     log: list[dict] = []
     lock = np.zeros(len(ctx.prep.V), bool)
     tree = cKDTree(ctx.prep.V)
@@ -871,11 +872,12 @@ def _peak_rounds(ctx: _Ctx, out: _Out, h: HausdorffResult, whole, target: int, d
         if lock[nv].all():
             break
         lock[nv] = True
-        o3, h3 = whole(target, lock)
+        o3, h3 = whole(target, lock, refuse_defects=True)
         if h3 is not None and ctx.cfg.refine_rounds:
             o3, h3, _ = _refine(ctx, o3, h3)
         keep = bool(h3 is not None and h3.max < h.max and _defects(o3) == 0 and _flaws(o3) <= _flaws(out))
-        log.append({"locked_vertices": int(lock.sum()), "hausdorff_max_before": float(h.max / ctx.scale),
+        log.append({"locked_vertices": int(lock.sum()), "defects": _defects(o3),
+                    "hausdorff_max_before": float(h.max / ctx.scale),
                     "hausdorff_max_after": None if h3 is None else float(h3.max / ctx.scale), "kept": keep})
         if not keep:
             break
@@ -1312,7 +1314,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
 
     measuring = cfg.measure_error or kind == "error"
 
-    def fitted(out: _Out) -> tuple[_Out, HausdorffResult | None]:
+    def fitted(out: _Out, o1: _Out | None = None) -> tuple[_Out, HausdorffResult | None]:
         """The fit (abandoned if it turns triangles against the input or into folds) and the
         measure of the result; the fit is kept only if its measured max is not above
         _FIT_TOLERANCE times the unfitted result's. A least-squares fit pulls sharp CSG/CAD
@@ -1320,8 +1322,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         without), so the unfitted result is measured too: first on the input's grid alone,
         then on both grids (_FIT_CHECK_ROUNDS refinement rounds, no cut cells: a subset of the
         full measure's points, so its max can only be lower than the full one), in full only
-        if neither already settles it."""
-        o1 = _fit(ctx, out)
+        if neither already settles it. ``o1``: the fit of ``out``, made already."""
+        o1 = _fit(ctx, out) if o1 is None else o1
         if not measuring:
             return o1, None
         h1 = _measure(ctx, o1)
@@ -1354,7 +1356,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         return o1, h1
 
     def whole(target: int, lock0: np.ndarray | None = None, rounds: int = _REPAIR_ROUNDS, fit: bool = True,
-              refuse_topology: bool = False):
+              refuse_defects: bool = False):
         if target >= T0:  # backing off all the way: the input as it is
             o = _identity(ctx)
             return o, o.h
@@ -1364,17 +1366,24 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
         if not fit:  # a back-off probe: the library's result, measured (the fit comes once, after)
             # a result with defects is refused whatever its error: not measured
             return o, (_measure(ctx, o) if measuring and _defects(o) == 0 else None)
-        if refuse_topology and o.new_nonmanifold.any():
+        if refuse_defects and o.new_nonmanifold.any():
             # refused whatever its error (the triangle target backs off from it; the fit moves
             # vertices only, so it cannot mend the topology): neither fitted nor measured
             return o, None
+        if refuse_defects and _defects(o):
+            # flipped triangles: refused too, unless the fit turns them back (it turns none
+            # against the input, and may turn some back); if it does not, not measured
+            o1 = _fit(ctx, o)
+            if _defects(o1):
+                return o1, None
+            return fitted(o, o1)
         return fitted(o)
 
     probes: list[dict] = []
     refine_log: list[dict] = []
     if kind == "triangles":
         target = int(value)
-        out, h = whole(target, refuse_topology=True)
+        out, h = whole(target, refuse_defects=True)
 
         def acceptable(o: _Out, hh) -> bool:
             return _defects(o) == 0 and (hh is None or cap <= 0 or hh.max <= cap)
@@ -1392,6 +1401,8 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                 rec.warn(f"{len(out.F)} triangles{got} would cost {why}; stopped at {len(o2.F)} triangles instead")
                 out, h = o2, h2
                 details["backed_off_from"] = target
+            elif h is None and measuring:  # (nothing to back off to: the result as it is, measured)
+                h = _measure(ctx, out)
             details["probes"] = probes
         if h is not None and cfg.refine_rounds and h.max > ROUNDS_FLOOR * scale:
             out, h, refine_log = _refine(ctx, out, h)

@@ -391,6 +391,51 @@ def test_backing_off_to_the_input_returns_the_input(monkeypatch, stuck):
         assert any(p["target"] < T0 and p["triangles"] == T0 and p["ok"] for p in rec.details["probes"])
 
 
+@pytest.mark.parametrize("where", ["first", "peak"])
+def test_refused_results_are_not_measured(monkeypatch, where):
+    """A result that is refused for its defects whatever its error is not measured: the first
+    result of a triangle target whose flips survive the fit (the stage backs off from it) and a
+    peak round's result with flips (that round is not kept). Here every result below the input's
+    count has a flip (``first``), or only those of the peak round (``peak``); the Hausdorff
+    measure and the fit check's original-side measure count what they are given."""
+    V, F = bumpy_sphere(3)
+    T0 = len(F)
+    real = S._defects
+    state = {"peak": False, "measured": []}
+    if where == "first":
+        monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 else real(o))
+    else:
+        monkeypatch.setattr(S, "_defects", lambda o: 1 if state["peak"] else real(o))
+        rounds = S._peak_rounds
+
+        def peak(*a, **k):
+            state["peak"] = True
+            try:
+                return rounds(*a, **k)
+            finally:
+                state["peak"] = False
+        monkeypatch.setattr(S, "_peak_rounds", peak)
+    for name in ("hausdorff", "original_side"):
+        fn = getattr(S, name)
+
+        def counted(*a, _fn=fn, _name=name, **k):
+            state["measured"].append((_name, state["peak"]))
+            return _fn(*a, **k)
+        monkeypatch.setattr(S, name, counted)
+    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
+    if where == "first":
+        # backed off all the way to the input, which needs no measure (its error is 0)
+        assert out.n_triangles == T0 and rec.details["backed_off_from"] == int(round(0.1 * T0))
+        assert state["measured"] == [] and rec.details["measures"] == 0
+        assert rec.accuracy["hausdorff_max"] == 0.0
+    else:
+        log = rec.details["peak_rounds"]
+        assert log, "the test needs a peak round"
+        assert log[0]["defects"] > 0 and log[0]["hausdorff_max_after"] is None and log[0]["kept"] is False
+        assert state["measured"] and not any(in_peak for _, in_peak in state["measured"])
+        assert rec.accuracy["flipped_triangles"] == 0 and 0 < rec.accuracy["hausdorff_max"]
+
+
 def test_error_ceiling_backs_off_to_more_triangles():
     """A target whose error would pass error_ceiling stops at more triangles, says why, and
     the result's measured error is within the ceiling."""

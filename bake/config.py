@@ -654,7 +654,7 @@ class _Where:
 
     def error(self, key: str, msg: str) -> ConfigError:
         if self.origin != "file":
-            return ConfigError(f"{msg} (from {self.origin} on the command line)", key=key)
+            return ConfigError(msg, key=key, origin=self.origin)
         return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
 
 
@@ -851,7 +851,7 @@ def error_at(cfg: Config, key: str, msg: str) -> ConfigError:
     if where is None and "[" in key:  # lighting.lights[0].color: the light's table
         where = next((v for k, v in cfg.given.items() if k.startswith(key.split("]")[0] + "]")), None)
     if where is not None and where != "file":
-        return ConfigError(f"{msg} (from {where} on the command line)", key=key)
+        return ConfigError(msg, key=key, origin=where)
     if cfg.source is None:
         return ConfigError(msg, key=key)
     try:

@@ -20,11 +20,12 @@ class BakeError(Exception):
     exit_code = 1
 
     def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None,
-                 key: str | None = None):
-        self.message = message
+                 key: str | None = None, origin: str | None = None):
+        self.message = message  # what was wrong, without the place
         self.path = Path(path) if path is not None else None
         self.line = line
         self.key = key
+        self.origin = origin  # the command-line option that gave the value (e.g. "--set k=v")
         super().__init__(self.format())
 
     def format(self) -> str:
@@ -35,7 +36,8 @@ class BakeError(Exception):
                 where += f":{self.line}"
         if self.key is not None:
             where = f"{where}: key '{self.key}'" if where else f"key '{self.key}'"
-        return f"{where}: {self.message}" if where else self.message
+        text = self.message if self.origin is None else f"{self.message} (from {self.origin} on the command line)"
+        return f"{where}: {text}" if where else text
 
 
 class ConfigError(BakeError):

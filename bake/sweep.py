@@ -41,7 +41,6 @@ import copy
 import io
 import json
 import math
-import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -133,12 +132,12 @@ def _with_value(cfg: Config, key: str, value: Any) -> Config:
 
 def _value_config(cfg: Config, key: str, value: Any, flag: str) -> Config:
     """:func:`_with_value`, with an error naming the sweep's option (``--vary``, ``--reference``)
-    that gave the value instead of the ``--set`` it is applied as."""
+    that gave the value instead of the ``--set`` it is applied as (``ConfigError.message`` is the
+    bare message; the origin is kept apart)."""
     try:
         return _with_value(cfg, key, value)
     except ConfigError as e:
-        msg = re.sub(r" \(from --set .* on the command line\)$", "", e.message)
-        raise ConfigError(f"{flag} value {value!r}: {msg}", key=e.key or key) from None
+        raise ConfigError(f"{flag} value {value!r}: {e.message}", key=e.key or key) from None
 
 
 @dataclass

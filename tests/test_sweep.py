@@ -104,6 +104,25 @@ def test_sweep_checks_every_value_before_baking_and_names_its_option(monkeypatch
     assert baked == []
 
 
+def test_sweep_names_its_option_when_the_key_came_from_set(monkeypatch):
+    """The sweep's message keeps the check's own words and names --vary, not the --set that
+    set the key before nor the --set the value is applied as. The origin is kept apart from
+    the message (the sweep once cut it off the text with a pattern), so an origin whose own text
+    holds the phrase stays whole."""
+    import bake.sweep as sweep_mod
+    from bake import config as config_mod
+
+    monkeypatch.setattr(sweep_mod, "_bake", lambda *a, **k: (_ for _ in ()).throw(AssertionError))
+    cfg = _cfg()
+    config_mod.apply_override(cfg, "lighting.ao.samples=8")
+    with pytest.raises(ConfigError) as e:
+        sweep(cfg, "lighting.ao.samples", [16, 0], scene=_scene())
+    assert str(e.value) == "key 'lighting.ao.samples': --vary value 0: must be >= 1"
+    err = ConfigError("must be >= 1", key="k", origin="--set k=0 (on the command line)")
+    assert err.message == "must be >= 1"
+    assert str(err) == "key 'k': must be >= 1 (from --set k=0 (on the command line) on the command line)"
+
+
 def test_sweep_soft_shadow_samples():
     sc = _scene(41)
     cfg = _cfg()

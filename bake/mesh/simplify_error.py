@@ -419,7 +419,8 @@ class SurfaceIndex:
 
     def near(self, P: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(point index, triangle) for every triangle whose bounding sphere comes within
-        ``radius`` of a point."""
+        ``radius`` of a point: each pair once, in no promised order (the K-nearest queries'
+        pairs, then the dense blocks'); callers sort what they use."""
         P = np.asarray(P, np.float64).reshape(-1, 3)
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(P),))
         if len(self.F) == 0 or len(P) == 0:

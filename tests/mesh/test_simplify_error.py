@@ -173,6 +173,54 @@ def test_near_pairs_and_near_set_against_every_pair(soup):
     assert np.array_equal(idx.near_set(P[:1], r[:1]), np.unique(ref[ref[:, 0] == 0, 1]))
     assert len(idx.near_set(P + 100.0, np.zeros(len(P)))) == 0
 
+@pytest.mark.parametrize("how", ["reversed", "shuffled"])
+def test_callers_of_near_do_not_depend_on_its_pair_order(monkeypatch, how):
+    """near() lists its pairs in no promised order (the K-nearest queries', then the dense
+    blocks'); its callers sort them. With the pairs handed back reversed or shuffled,
+    ``exact`` (its fallback for points with no close candidate) and the stage's locks under
+    flipped triangles (``_lock_under``) give the same arrays bit for bit."""
+    from types import SimpleNamespace
+
+    from bake.mesh import simplify as S
+    from bake.mesh import simplify_error as E
+
+    Va, Fa = bumpy(5)  # more triangles than exact()'s brute-force path takes
+    assert len(Fa) > E._EXACT_BRUTE
+    rng = np.random.default_rng(21)
+    Q = Va[rng.integers(0, len(Va), 400)] + rng.normal(scale=0.05, size=(400, 3))
+    # a simplified mesh on a subset of the input's vertices (the library's kind of result)
+    keep = np.flatnonzero(rng.random(len(Va)) < 0.25)
+    hull = trimesh.convex.convex_hull(Va[keep])
+    Vo = np.asarray(hull.vertices, np.float64)
+    src = np.array([int(np.flatnonzero((Va == v).all(axis=1))[0]) for v in Vo])
+    Fo = np.asarray(hull.faces, np.int64)
+    bad = np.zeros(len(Fo), bool)
+    bad[::3] = True
+    prep = SimpleNamespace(V=Va, F=Fa)
+    out = SimpleNamespace(V=Vo, F=Fo, src_vertex=src, flipped=bad, new_nonmanifold=np.zeros(len(Fo), bool),
+                          folded=None)
+
+    def results():
+        idx = SurfaceIndex(Va, Fa, seed=1)
+        d, t = idx.exact(Q, 1.5 * idx.distance(Q)[0] + 0.01)
+        return d, t, S._lock_under(prep, out, SurfaceIndex(Va, Fa, seed=1), np.zeros(len(Va), bool))
+
+    d0, t0, lock0 = results()
+    near = SurfaceIndex.near
+    calls = []
+
+    def permuted(self, P, radius):
+        rows, tris = near(self, P, radius)
+        calls.append(len(rows))
+        p = np.arange(len(rows))[::-1] if how == "reversed" else np.random.default_rng(len(calls)).permutation(len(rows))
+        return rows[p], tris[p]
+    monkeypatch.setattr(SurfaceIndex, "near", permuted)
+    d1, t1, lock1 = results()
+    assert len(calls) >= 2 and max(calls) > 100  # both callers went through near
+    assert np.array_equal(d0, d1) and np.array_equal(t0, t1)
+    assert lock0.any() and np.array_equal(lock0, lock1)
+
+
 # --------------------------------------------------------------------------- flips
 def test_flat_cad_panel_retriangulated_has_no_flips():
     """A flat panel cut into a fine grid, against the same panel triangulated as a fan from one

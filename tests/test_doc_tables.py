@@ -31,6 +31,29 @@ def test_every_generated_table_matches_the_committed_results():
     assert not bad, "\n".join(bad) + "\nregenerate with: .venv/bin/python tools/doc_tables.py"
 
 
+def test_every_source_says_how_to_make_it_again():
+    """Each results file a doc table reads is either what a benchmark writes with its defaults
+    (``benchmarks/bench_X.py`` -> ``X.json``, which ``make bench`` runs) or records the
+    ``command`` of the run that wrote it, a benchmark script of this repo, and the doc names a
+    benchmark beside the table (within the 40 lines before it)."""
+    problems = []
+    for doc in dt.doc_files(REPO):
+        lines = doc.read_text("utf-8").splitlines()
+        for b in dt.blocks(doc):
+            src = b.spec["source"]
+            if (REPO / "benchmarks" / f"bench_{Path(src).stem}.py").exists():
+                continue
+            cmd = json.loads((dt.RESULTS / src).read_text("utf-8")).get("command")
+            cmds = cmd if isinstance(cmd, list) else [cmd]
+            scripts = {w for c in cmds if isinstance(c, str) for w in c.split() if w.startswith("benchmarks/bench_")}
+            if not scripts or not all((REPO / w).exists() for w in scripts):
+                problems.append(f"{doc.name}:{b.line}: {src} records no command of a benchmark here ({cmd!r})")
+            near = "\n".join(lines[max(0, b.line - 41):b.line])
+            if not any(w in near for w in scripts):
+                problems.append(f"{doc.name}:{b.line}: {src}: the doc does not name the run beside the table")
+    assert not problems, "\n".join(problems)
+
+
 SPEC = {"source": "b.json", "rows": "models", "keys": ["b", "a"], "labels": {"a": "model A"},
         "align": "lrr", "columns": [["model", "{label} ({tris:,})"], ["reads", "{q.reads:.1f}"],
                                     ["share", "{share:.1%} of {_.total}"]]}

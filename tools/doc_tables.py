@@ -16,8 +16,11 @@ opening one holds the table's spec as JSON (GitHub does not show the comments)::
 
 Spec keys:
 
-* ``source`` -- a JSON file in ``benchmarks/results/`` (what ``make bench`` writes; the files are
-  committed so the docs can be checked against them);
+* ``source`` -- a JSON file in ``benchmarks/results/``: what ``make bench`` writes (each
+  benchmark with its defaults), or a benchmark run with other options (a narrower run, another
+  ``--before`` commit), whose command the doc names beside the table and the JSON records under
+  ``command``; ``make bench`` does not run those again. The files are committed so the docs can
+  be checked against them;
 * ``rows`` -- dotted path to the rows in that file: a dict (one row per key, in file order) or a
   list (one row per element);
 * ``keys`` -- (dict rows) which keys, in this order; ``labels`` -- key -> ``{label}`` text

@@ -88,7 +88,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{label}: {row['seconds']:.3f}s, before {row['seconds_before']:.3f}s ({row['speedup']}x), "
                   f"{row['triangles_out']} triangles, same mesh: {same}", flush=True)
         ref = before.ref
-    result = {"command": "benchmarks/bench_simplify_cases.py --before " + args.before, "before": ref,
+    default_out = Path(ap.get_default("out")).resolve()
+    command = "benchmarks/bench_simplify_cases.py --before " + args.before
+    if Path(args.out).resolve() != default_out:
+        command += " --out " + os.path.relpath(Path(args.out).resolve(), REPO)
+    result = {"command": command, "before": ref,
               "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                           "load_average": list(os.getloadavg())},
               "date": time.strftime("%Y-%m-%d"), "rows": rows}

@@ -34,8 +34,9 @@ def test_every_generated_table_matches_the_committed_results():
 def test_every_source_says_how_to_make_it_again():
     """Each results file a doc table reads is either what a benchmark writes with its defaults
     (``benchmarks/bench_X.py`` -> ``X.json``, which ``make bench`` runs) or records the
-    ``command`` of the run that wrote it, a benchmark script of this repo, and the doc names a
-    benchmark beside the table (within the 40 lines before it)."""
+    ``command`` of the run that wrote it, a benchmark script of this repo, and the doc names
+    that script and the results file beside the table (within the 40 lines before it: a table
+    above it that names another run of the same script is not enough)."""
     problems = []
     for doc in dt.doc_files(REPO):
         lines = doc.read_text("utf-8").splitlines()
@@ -48,8 +49,8 @@ def test_every_source_says_how_to_make_it_again():
             scripts = {w for c in cmds if isinstance(c, str) for w in c.split() if w.startswith("benchmarks/bench_")}
             if not scripts or not all((REPO / w).exists() for w in scripts):
                 problems.append(f"{doc.name}:{b.line}: {src} records no command of a benchmark here ({cmd!r})")
-            near = "\n".join(lines[max(0, b.line - 41):b.line])
-            if not any(w in near for w in scripts):
+            near = "\n".join(lines[max(0, b.line - 41):b.line - 1])  # (not the spec itself)
+            if not any(w in near for w in scripts) or src not in near:
                 problems.append(f"{doc.name}:{b.line}: {src}: the doc does not name the run beside the table")
     assert not problems, "\n".join(problems)
 

@@ -1394,6 +1394,7 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
             why = (f"{int(out.flipped.sum())} flipped triangle(s), {int(out.new_nonmanifold.sum())} on new "
                    f"non-manifold edges" if _defects(out) else
                    f"an error of {h.max / scale:.3%} of the diagonal (error_ceiling = {cfg.error_ceiling})")
+            # (never None: the probes go up to the input itself, which is always acceptable)
             n, o2, h2 = _back_off(target, T0, whole, acceptable, probes, scale)
             if o2 is not None:
                 o2, h2 = fitted(o2)  # kept only if not worse than the probe's measured result
@@ -1401,8 +1402,6 @@ def simplify_mesh(scene: Scene, cfg: SimplifyConfig) -> tuple[Scene, StageRecord
                 rec.warn(f"{len(out.F)} triangles{got} would cost {why}; stopped at {len(o2.F)} triangles instead")
                 out, h = o2, h2
                 details["backed_off_from"] = target
-            elif h is None and measuring:  # (nothing to back off to: the result as it is, measured)
-                h = _measure(ctx, out)
             details["probes"] = probes
         if h is not None and cfg.refine_rounds and h.max > ROUNDS_FLOOR * scale:
             out, h, refine_log = _refine(ctx, out, h)

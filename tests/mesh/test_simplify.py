@@ -436,6 +436,32 @@ def test_refused_results_are_not_measured(monkeypatch, where):
         assert rec.accuracy["flipped_triangles"] == 0 and 0 < rec.accuracy["hausdorff_max"]
 
 
+def test_flips_the_fit_turns_back_are_measured_and_kept(monkeypatch):
+    """The other side of the test above: a first result whose flips the fit turns back is
+    measured and kept as before. Every result the library hands back (``_finish``) counts as
+    flipped here, every fitted one as it is; the stage must give the same mesh and accuracy as
+    without that (the fit is kept on this model, so nothing else changes)."""
+    V, F = bumpy_sphere(3)
+    T0 = len(F)
+    config = SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000)
+    want, want_rec = S.stage(make_scene(V, F), config)
+    assert want_rec.details["fit"]["kept"] is True and "backed_off_from" not in want_rec.details
+    raw = []
+    finish, real = S._finish, S._defects
+
+    def marked(*a, **k):
+        o = finish(*a, **k)
+        raw.append(o)
+        return o
+    monkeypatch.setattr(S, "_finish", marked)
+    monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 and any(o is r for r in raw) else real(o))
+    got, rec = S.stage(make_scene(V, F), config)
+    assert raw and "backed_off_from" not in rec.details and rec.details["measures"] > 0
+    np.testing.assert_array_equal(got.positions, want.positions)
+    np.testing.assert_array_equal(got.triangles, want.triangles)
+    assert rec.accuracy == want_rec.accuracy
+
+
 def test_error_ceiling_backs_off_to_more_triangles():
     """A target whose error would pass error_ceiling stops at more triangles, says why, and
     the result's measured error is within the ceiling."""

@@ -7,8 +7,11 @@ both sides of the other's plane. Then each has parts strictly in front of and be
 plane, each may hide the other (bake/bsp/build.py's "may hide" relation both ways, at the same
 tolerance), and no order of the two whole triangles is right from every eye: one of them is cut
 (the tree keeps a fragment whole only where a piece would be a sliver below ``min_area`` or
-would collapse on the written grid). Triangles that share a corner (by position) are never a
-pair; triangles that only touch, or pass within the tolerance, are not either.
+would collapse on the written grid). Triangles that share an edge (two corners, by position)
+are never a pair; triangles that share one corner are a pair when the edge of one opposite that
+corner passes through the other (a surface folded through itself, an eye that touches the head at
+a corner and passes through it); triangles that only touch, or pass within the tolerance, are
+not.
 
 The pairs to check come from a uniform grid over the faces' boxes (cells the size of the median
 box; a face spanning more than ``_MAX_CELLS`` cells is paired by its box with every face, in
@@ -186,12 +189,13 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray, tol: float, ids: np.ndarray | N
     P = _candidate_pairs(Cl.min(axis=1), Cl.max(axis=1), tol)
     if len(P) == 0:
         return none
-    # corners shared by position
+    # corners shared by position: neighbours across an edge cannot cross (each has a corner on
+    # the other's plane, the shared edge, and its third on one side of it), the test skips them
     K = (_position_ids(V) if ids is None else ids)[F[live]]
     found = []
     for s in range(0, len(P), _CHUNK // 16):
         Q = P[s:s + _CHUNK // 16]
-        Q = Q[~(K[Q[:, 0]][:, :, None] == K[Q[:, 1]][:, None, :]).any(axis=(1, 2))]
+        Q = Q[(K[Q[:, 0]][:, :, None] == K[Q[:, 1]][:, None, :]).any(axis=2).sum(axis=1) < 2]
         found.append(live[Q[_crosses(Cl[Q[:, 0]], Cl[Q[:, 1]], tol)]])
     out = np.sort(np.concatenate(found), axis=1)
     return out[np.lexsort((out[:, 1], out[:, 0]))]

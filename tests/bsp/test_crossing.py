@@ -43,11 +43,12 @@ def _segment_through(p, q, a, b, c) -> bool:
 
 
 def brute_pairs(V, F) -> set[tuple[int, int]]:
-    """Every pair of triangles sharing no corner position, one edge of either through the other."""
+    """Every pair of triangles sharing at most one corner position (an edge's neighbours cannot
+    cross), one edge of either through the other."""
     key = [tuple(map(tuple, V[f])) for f in F]
     out = set()
     for i, j in itertools.combinations(range(len(F)), 2):
-        if set(key[i]) & set(key[j]):
+        if len(set(key[i]) & set(key[j])) >= 2:
             continue
         A, B = V[F[i]], V[F[j]]
         if any(_segment_through(E[k], E[(k + 1) % 3], *T) for E, T in ((A, B), (B, A)) for k in range(3)):
@@ -137,6 +138,40 @@ def test_a_pierced_face_within_the_tolerance_of_the_other_plane_is_no_pair():
     assert rec.details["splits"] == 0 and rec.details["crossing"]["pairs"] == 0
 
 
+def test_random_soups_with_shared_corners_against_the_brute_force():
+    """Triangles whose corners come from a small pool of points, so that many pairs share one
+    corner or an edge: a pair sharing one corner crosses when the edge opposite it passes
+    through the other; a pair sharing an edge never does."""
+    rng = np.random.default_rng(3)
+    V = rng.random((40, 3))
+    F = np.array([rng.choice(40, 3, replace=False) for _ in range(300)])
+    got = set(map(tuple, crossing.crossing_pairs(V, F, 1e-9).tolist()))
+    ref = brute_pairs(V, F)
+    K = [set(f.tolist()) for f in F]
+    one = {p for p in ref if len(K[p[0]] & K[p[1]]) == 1}
+    assert len(one) > 20 and len(ref) > len(one)  # both kinds are there
+    assert got == ref
+
+
+def test_a_fold_through_itself_crosses_and_a_fan_does_not():
+    """Two triangles sharing one corner: the second's far edge passes through the first (a fold
+    through itself: a pair, also at a tolerance of 1% of its size), or stays above it (a fan:
+    none); and two sharing an edge, folded flat onto each other, are never a pair."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, -0.5], [0.3, 0.3, 0.5], [0.3, 0.3, 0.2],
+                  [0.6, 0.1, 0.5], [0.5, 0.5, 0.0]], float)
+    fold, fan, flat = np.array([[0, 1, 2], [0, 3, 4]]), np.array([[0, 1, 2], [0, 5, 6]]), np.array([[0, 1, 2], [1, 2, 7]])
+    assert crossing.crossing_pairs(V, fold, 1e-9).tolist() == [[0, 1]]
+    assert crossing.crossing_pairs(V, fold, 1e-2).tolist() == [[0, 1]]
+    assert len(crossing.crossing_pairs(V, fan, 1e-9)) == 0
+    assert len(crossing.crossing_pairs(V, flat, 1e-9)) == 0
+    for F in (fold, fan, flat):
+        assert set(map(tuple, crossing.crossing_pairs(V, F, 1e-9).tolist())) == brute_pairs(V, F)
+    # the fold's pair, through the stage: one of the two is cut (4 triangles or more out)
+    out, rec = _stage(V, fold)
+    assert rec.details["crossing"]["pairs"] == 1 and rec.details["crossing"]["pairs_within_one_part"] == 0
+    assert out.n_triangles > 2
+
+
 def test_within_the_tolerance_nothing_crosses():
     """A box sunk 1e-4 into another crosses it; with a tolerance above that, it only touches."""
     V, F = _boxes(((0, 0, 0), (1, 1, 1)), ((0.2, 0.2, 1 - 1e-4), (0.8, 0.8, 1.5)))
@@ -186,11 +221,11 @@ def test_suzannes_eyes_cross_its_head_and_nothing_else_crosses():
     V, F = s.positions, s.triangles
     tol = 2e-5 * s.scale()
     got = crossing.crossing_pairs(V, F, tol)
-    # every pair of triangles that share no corner position, tested with the same check
+    # every pair of triangles that share at most one corner position, tested with the same check
     i, j = np.triu_indices(len(F), 1)
     _, vid = np.unique(V, axis=0, return_inverse=True)
     K = vid.reshape(-1)[F]
-    apart = ~(K[i][:, :, None] == K[j][:, None, :]).any(axis=(1, 2))
+    apart = (K[i][:, :, None] == K[j][:, None, :]).any(axis=2).sum(axis=1) < 2
     i, j = i[apart], j[apart]
     C = V[F]
     hit = crossing._crosses(C[i], C[j], tol)

@@ -60,8 +60,8 @@ def _pairs_in_groups(key: np.ndarray, face: np.ndarray, lo: np.ndarray, hi: np.n
         if tot:
             i = np.repeat(np.arange(s, e), cnt)
             j = i + 1 + (np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt))
-            a, b = face[i], face[j]
-            keep = (a != b) & _overlap(lo, hi, a, b)
+            a, b = face[i], face[j]  # (distinct: a face has one entry per cell)
+            keep = _overlap(lo, hi, a, b)
             out.append(np.stack([np.minimum(a, b)[keep], np.maximum(a, b)[keep]], axis=1))
         s = e
     return out

@@ -3,7 +3,8 @@ vertex order, with the stage's seconds next to the bare library call's, side by 
 
     .venv/bin/python benchmarks/bench_simplify.py [--models bunny,spot,teapot,boolean,strips]
         [--ratios 0.5,0.1,0.02,0.01] [--orderings given,right,shuffle1,...,shuffle5]
-        [--before GIT_REF] [--no-methods] [--no-sweep] [--no-speed] [--out benchmarks/results/simplify.json]
+        [--before GIT_REF] [--no-methods] [--no-sweep] [--no-speed] [--passes] [--speed-passes]
+        [--out benchmarks/results/simplify.json]
     .venv/bin/python benchmarks/bench_simplify.py --models "" --no-methods --no-sweep --before main   # speed rows only
     .venv/bin/python benchmarks/bench_simplify.py --derive benchmarks/results/simplify.json
 
@@ -36,7 +37,11 @@ and the default, reported and independent max. ``sweep``: the bunny at 1% with
 in the right-handed frame, with the default stage, without the peak round and without the
 refine and peak rounds: the seconds and the reported max each costs and buys (the speed goal's
 trade; these rows measure nothing independently: the reported max agreed with the independent
-one within 2% on every accuracy row of ``simplify.json``).
+one within 2% on every accuracy row of ``simplify.json``). ``speed_passes`` (``--speed-passes``):
+the speed rows' models also without the peak round, without the refine and peak rounds, and with
+no optional pass at all (``fit_iterations``, ``refine_rounds`` and ``peak_rounds`` 0: the library,
+the flip repairs and checks, one measure and the proven bound, what every run needs), each best
+of 3 in the same interleaved runs, with its ratio to the old stage's default (``--before``).
 
 Timings on a shared machine are noisy: compare within one run (the load average is recorded).
 """
@@ -80,6 +85,9 @@ PASSES = {  # --passes: the stage with its rounds on and off
     "no peak round": dict(peak_rounds=0),
     "no refine or peak rounds": dict(refine_rounds=0, peak_rounds=0),
 }
+# --speed-passes: the stage with nothing optional, only what every run needs (the library, the
+# flip repairs and checks, one measure, the proven bound): the floor of the present design
+FLOOR = {"no fit, refine or peak rounds": dict(fit_iterations=0, refine_rounds=0, peak_rounds=0)}
 REF_SAMPLES = 100_000
 REF_ROUNDS = 5
 
@@ -295,6 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-methods", action="store_true")
     ap.add_argument("--no-sweep", action="store_true")
     ap.add_argument("--no-speed", action="store_true")
+    ap.add_argument("--speed-passes", action="store_true",
+                    help="the speed rows also without the peak round, without the refine and peak rounds and "
+                         "without any optional pass (speed_passes rows)")
     ap.add_argument("--passes", action="store_true", help="the refine and peak rounds on and off (passes rows)")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simplify.json"))
     ap.add_argument("--derive", metavar="FILE", help="only recompute the derived figures of a results file")
@@ -309,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     load_start = os.getloadavg()
     tmp = Path(tempfile.mkdtemp(prefix="bench-simplify-"))
     before = Before(args.before, tmp) if args.before else None
-    rows, speed, methods, sweep, passes = [], [], [], [], []
+    rows, speed, methods, sweep, passes, speed_passes = [], [], [], [], [], []
 
     for model in filter(None, args.models.split(",")):  # --models "" runs no accuracy rows
         orderings = args.orderings.split(",") if model == "bunny" else ["given"]
@@ -332,16 +343,20 @@ def main(argv: list[str] | None = None) -> int:
                       flush=True)
 
     if not args.no_speed:
+        variants = [("default", {})]
+        if args.speed_passes:
+            variants += [(name, cfg) for name, cfg in PASSES.items() if cfg] + list(FLOOR.items())
         for model, target in (("bunny", 2000), ("suzanne", 300), ("ico4", 300)):
             path, _ = variant(model, "given", tmp)
             scene = load(path, None)
-            best, rec, old = None, None, []
+            runs: dict = {name: [] for name, _ in variants}
+            old = []
             for _ in range(3):  # the old stage's runs between the new one's: the same load for both
-                out, r, sec = run_stage(scene, target_triangles=target)
-                if best is None or sec < best:
-                    best, rec = sec, r
+                for name, cfg in variants:
+                    runs[name].append(run_stage(scene, target_triangles=target, **cfg))
                 if before is not None:
                     old.append(before.run(path, None, {"target_triangles": target}, repeat=1)[0])
+            out, rec, best = min(runs["default"], key=lambda r: r[2])
             lib = library_seconds(scene, target)
             entry = {"model": model, "triangles_in": int(scene.n_triangles), "target": target,
                      "triangles_out": int(out.n_triangles), "stage_seconds_best_of_3": round(best, 3),
@@ -359,6 +374,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"speed {model} -> {target}: stage {best:.3f}s library {lib * 1e3:.1f}ms ({best / lib:.0f}x)"
                   + (f" before {entry['before']['stage_seconds_best_of_3']:.3f}s ({entry['speedup']}x faster)"
                      if before is not None else ""), flush=True)
+            for name, cfg in variants if args.speed_passes else []:
+                o, r, sec = min(runs[name], key=lambda x: x[2])
+                sp = {"model": model, "triangles_in": int(scene.n_triangles), "target": target, "stage": name,
+                      **cfg, "triangles_out": int(o.n_triangles), "stage_seconds_best_of_3": round(sec, 3),
+                      "stage_over_library": round(sec / lib, 1), "reported_max": r.accuracy.get("hausdorff_max")}
+                if before is not None:
+                    sp["now_over_before"] = round(sec / entry["before"]["stage_seconds_best_of_3"], 2)
+                speed_passes.append(sp)
+                print(f"  {name:30s} {sec:.3f}s reported {sp['reported_max']:.4%}"
+                      + (f" ({sp['now_over_before']}x the stage before)" if before is not None else ""), flush=True)
 
     if not args.no_methods:
         scene = load(*variant("bunny", "given", tmp))
@@ -413,6 +438,7 @@ def main(argv: list[str] | None = None) -> int:
                      f"direction (every vertex, edge points, area-weighted), refined {REF_ROUNDS} times around its "
                      f"worst samples; fractions of the bbox diagonal",
         "rows": rows, "speed": speed, "methods": methods, "sweep": sweep, "passes": passes,
+        "speed_passes": speed_passes,
     }
     derive(result)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

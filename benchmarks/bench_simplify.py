@@ -191,6 +191,13 @@ def run_stage(scene, **kw):
     return out, rec, time.perf_counter() - t
 
 
+def phases(rec) -> dict:
+    """The record's seconds per phase (they add up to the stage's seconds)."""
+    return {k[:-8]: rec.details.get(k) for k in ("prepare_seconds", "library_seconds", "fit_seconds",
+                                                 "repair_seconds", "check_seconds", "measure_seconds",
+                                                 "other_seconds")}
+
+
 # --------------------------------------------------------------------------- the old stage
 _WORKER = r"""
 import json, sys, time
@@ -362,9 +369,7 @@ def main(argv: list[str] | None = None) -> int:
                      "triangles_out": int(out.n_triangles), "stage_seconds_best_of_3": round(best, 3),
                      "library_seconds_best_of_3": round(lib, 5), "stage_over_library": round(best / lib, 1),
                      "reported_max": rec.accuracy.get("hausdorff_max"),
-                     "phase_seconds": {k[:-8]: rec.details.get(k) for k in (
-                         "prepare_seconds", "library_seconds", "fit_seconds", "repair_seconds", "check_seconds",
-                         "measure_seconds")}}
+                     "phase_seconds": phases(rec)}
             if before is not None:
                 res = min(old, key=lambda x: x["stage_seconds"])
                 entry["before"] = {"stage_seconds_best_of_3": round(res["stage_seconds"], 3),
@@ -378,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
                 o, r, sec = min(runs[name], key=lambda x: x[2])
                 sp = {"model": model, "triangles_in": int(scene.n_triangles), "target": target, "stage": name,
                       **cfg, "triangles_out": int(o.n_triangles), "stage_seconds_best_of_3": round(sec, 3),
-                      "stage_over_library": round(sec / lib, 1), "reported_max": r.accuracy.get("hausdorff_max")}
+                      "stage_over_library": round(sec / lib, 1), "reported_max": r.accuracy.get("hausdorff_max"),
+                      "phase_seconds": phases(r)}
                 if before is not None:
                     sp["now_over_before"] = round(sec / entry["before"]["stage_seconds_best_of_3"], 2)
                 speed_passes.append(sp)

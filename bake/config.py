@@ -369,7 +369,8 @@ class ExportConfig:
     # single-sided triangles that face away); without the list every material is single-sided.
     two_sided: Literal["auto", "yes", "no"] = "auto"
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
-    # Ngons lists); polygons that cannot be kept whole are written as triangles.
+    # Ngons lists); polygons that cannot be kept whole are written as triangles, and so is every
+    # face with a BSP tree, a BVH or a list that goes per triangle (tri colors, uvs; docs/formats.md).
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
     # Positions are rounded to this many significant digits of the model's size: a step of the
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
@@ -930,9 +931,10 @@ def get_key(cfg: Any, key: str) -> Any:
 
 
 # Names in the output folder that every bake writes (the reports, the list and asset folders,
-# bake watch's script, the sweeps and the xatlas cache): no configured output name may take one.
+# bake watch's script, the sweeps, the xatlas cache and the manifest of what the bake wrote,
+# bake/export/write.py's MANIFEST): no configured output name may take one.
 RESERVED_OUTPUT_NAMES = ("report.json", "report.md", "report.html", "report-live.js", "lists", "assets", "sweeps",
-                         ".bake-cache")
+                         ".bake-cache", ".bake-manifest.json")
 
 
 def validate(cfg: Config) -> None:

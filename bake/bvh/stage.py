@@ -64,6 +64,11 @@ def prepare(scene: Scene, precision: int) -> tuple[np.ndarray, np.ndarray, int |
 
 def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
     _check(cfg)
+    taken = sorted(set(list_names(cfg.list_prefix).values()) & set(scene.lists))
+    if taken:  # (the BSP stage's lists, say): one would silently replace the other
+        raise ConfigError(f"list name '{taken[0]}' is already written by an earlier stage "
+                          f"({(scene.lists[taken[0]].doc or 'a stage list').split(' (')[0]}); choose another prefix",
+                          key="bvh.list_prefix")
     t0 = time.perf_counter()
     rec = StageRecord(name="bvh")
     tq, keep, d, pad = prepare(scene, cfg.precision)

@@ -433,8 +433,18 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     cfg = report.get("config", {})
     json_name = cfg.get("export", {}).get("json_name", "lists.json")
     has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
+    if not has_json and cfg.get("export", {}).get("json", True):
+        raise InputError(f"{json_name} is missing, though report.json says the bake wrote it (bake the model again)",
+                         path=out_dir / json_name)
     lists_doc = _load_json(out_dir, json_name, files) if has_json else {"lists": {}}
-    lists = lists_doc.get("lists", {})
+    lists = lists_doc.get("lists", {}) if isinstance(lists_doc, dict) else None
+    if has_json:
+        want = set(report.get("lists", {}))
+        if not isinstance(lists, dict) or not want <= set(lists):
+            gone = sorted(want - set(lists)) if isinstance(lists, dict) else []
+            raise InputError("does not hold the lists report.json says the bake wrote"
+                             + (f" (missing: {', '.join(repr(g) for g in gone[:5])})" if gone else "")
+                             + "; bake the model again", path=out_dir / json_name)
     costumes = _sb3_costumes(out_dir, report, files)
     textures = decoded_textures(lists, report, costumes)
     lightmap = next((t for t in textures if t["name"] == "lightmap"), None)

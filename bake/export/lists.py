@@ -187,10 +187,21 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
     ngon_sizes = np.zeros(0, np.int64)
     ngon_corners = np.zeros(0, np.int64)  # 0-based corners of whole n-gons, one after another
     ngon_mat = np.zeros(0, np.int64)
+    choice = choose_lists(scene, cfg)
+    # lists that hold one entry per written triangle (or number the scene's triangles): a quad or
+    # n-gon written whole would leave its triangles without them
+    per_tri = [f"'{c.name}'" for c in (choice[n.triangle_colors], choice[n.uvs], choice[n.lightmap_uvs]) if c.write]
+    if "bvh" in scene.artefacts:
+        per_tri.append("the BVH's triangle numbers")
+    whole_faces = cfg.faces != "triangles" and "bsp" not in scene.artefacts and not per_tri
     if cfg.faces != "triangles":
         if "bsp" in scene.artefacts:
             record.warn(f"export.faces = '{cfg.faces}' ignored: the BSP stage orders triangles, "
                         "so every face is written to the triangle list")
+        elif per_tri:
+            record.warn(f"export.faces = '{cfg.faces}' ignored: {', '.join(per_tri)} "
+                        f"{'go' if len(per_tri) > 1 else 'goes'} per triangle, so every face is written to the "
+                        "triangle list")
         else:
             off = scene.poly_offsets
             quads, covered4 = _whole_polygons(scene, 4)
@@ -232,7 +243,7 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
                                            "max_error_of_diagonal": record.accuracy["position_error"]}
 
     poly_lists: list[ScratchList] = []
-    if cfg.faces != "triangles" and "bsp" not in scene.artefacts:
+    if whole_faces:
         q = np.concatenate([new_of[quad_idx] + 1, quad_mat[:, None] + 1], axis=1) if len(quad_idx) else \
             np.zeros((0, 5), np.int64)
         poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad", "int"))
@@ -259,7 +270,6 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         vals, kind = _colour_list(mc, cfg.color_format)
         out.append(ScratchList(n.materials, vals, 1, "colour number per material", kind))
 
-    choice = choose_lists(scene, cfg)
     if choice[n.two_sided].write:
         two = np.array([bool(m.double_sided) for m in scene.materials], dtype=bool)
         out.append(ScratchList(n.two_sided, two.astype(np.int64), 1,

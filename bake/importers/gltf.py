@@ -47,6 +47,10 @@ SUPPORTED_EXTENSIONS = {
     "KHR_mesh_quantization", "KHR_materials_unlit", "KHR_materials_emissive_strength",
 }
 
+# glTF 2.0's default material (a primitive without "material"): baseColorFactor [1, 1, 1, 1],
+# single-sided; an OBJ without a material gets bake's grey (DEFAULT_MATERIAL) instead
+GLTF_DEFAULT_MATERIAL = DEFAULT_MATERIAL.with_(color=(1.0, 1.0, 1.0, 1.0))
+
 
 def _draco_available() -> bool:
     try:
@@ -514,7 +518,7 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
         lut[m] = k
     if (gl_mats < 0).any() or not materials:
         lut[-1] = len(materials)
-        materials.append(DEFAULT_MATERIAL)
+        materials.append(GLTF_DEFAULT_MATERIAL)
     poly_material = lut[gl_mats]
 
     V = offset

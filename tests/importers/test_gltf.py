@@ -760,7 +760,8 @@ def test_materials_textures_and_defaults(tmp_path):
     assert data.texture_data == PNG
     assert m1.color == (1, 0, 0, 1.0) and m2.color == (1, 0, 0, 0.0)  # MASK by cutoff
     assert gone.texture is None and any("gone.png" in w for w in rec.warnings)
-    assert default.name == "default"
+    # glTF's default material: white (baseColorFactor [1, 1, 1, 1]), single-sided, not the OBJ grey
+    assert default.name == "default" and default.color == (1.0, 1.0, 1.0, 1.0) and not default.double_sided
     np.testing.assert_array_equal(scene.poly_material, np.arange(7))
     assert rec.counts_out["materials"] == 7 and rec.counts_out["textures"] == 3
     assert (tmp_path / "tex.png") in scene.source.files_read

@@ -295,6 +295,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.strict and any(not lim["ok"] for lim in rep["limits"]):
         bad = [lim for lim in rep["limits"] if not lim["ok"]][0]
         raise LimitError(f"limit exceeded: {bad['name']} = {bad['value']} > {bad['limit']}", path=target)
+    if args.strict and rep["problems"]:  # (as `bake run --strict` fails on a stage's problems)
+        raise LimitError(f"{len(rep['problems'])} problem(s) under --strict, first: {rep['problems'][0]}",
+                         path=target)
     return 0
 
 
@@ -374,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     ck = sub.add_parser("check", help="where a project's bytes go: lists, blocks, assets against Scratch's limits")
     ck.add_argument("target", help="an .sb3 (or a project.json)")
     ck.add_argument("--json", action="store_true")
-    ck.add_argument("--strict", action="store_true", help="exit 4 if a limit is exceeded")
+    ck.add_argument("--strict", action="store_true", help="exit 4 if a limit is exceeded or the project has a problem")
     ck.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show Python tracebacks")
     ck.set_defaults(func=cmd_check)
 

@@ -990,6 +990,10 @@ def validate(cfg: Config) -> None:
              "must be a file name, not a path")
         need(name.lower() not in RESERVED_OUTPUT_NAMES, key,
              f"'{name}' is a name the bake writes itself ({', '.join(RESERVED_OUTPUT_NAMES)}); choose another")
+    for f in dataclasses.fields(ListNames):
+        name = getattr(cfg.export.names, f.name)
+        need(bool(name.strip()) and name.strip(". ") != "", f"export.names.{_toml_name(f.name)}",
+             f"must be a list name (got {name!r})")
     for i, lt in enumerate(cfg.lighting.lights):
         need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
         need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")

@@ -116,3 +116,38 @@ def test_report_on_a_folder_without_its_lists_exits_3_and_keeps_the_page(baked):
     r = bake_subprocess(["report", out])
     assert "missing: 'mat colors', 'tris'" in one_error_line(r, 3, lists)
     assert (out / "report.html").read_bytes() == page
+
+
+@pytest.mark.parametrize("value", ["", "..", " "])
+def test_a_blank_list_name_is_refused(baked, value):
+    model, out = baked
+    before = _digests(out)
+    r = bake_subprocess(["run", model, "--out", out, "--set", f"export.names.vertices={value}"])
+    assert "must be a list name" in one_error_line(r, 2, "export.names.vertices")
+    assert _digests(out) == before
+
+
+def test_list_names_that_differ_only_in_case_are_refused(baked):
+    model, out = baked
+    r = bake_subprocess(["run", model, "--out", out, "--set", "export.names.vertices=Tris"])
+    assert "lists 'Tris' and 'tris' map to the same file" in one_error_line(r, 2, "export.names")
+
+
+def test_check_strict_fails_on_a_project_problem(baked, tmp_path):
+    import zipfile
+    _, out = baked
+    good = out / "grid.sb3"
+    assert bake_subprocess(["check", good, "--strict"]).returncode == 0
+    bad = tmp_path / "bad.sb3"
+    with zipfile.ZipFile(good) as zin, zipfile.ZipFile(bad, "w") as zout:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename == "project.json":
+                doc = json.loads(data)
+                doc["targets"][0]["costumes"][0]["md5ext"] = "missing.svg"
+                data = json.dumps(doc).encode()
+            zout.writestr(info, data)
+    r = bake_subprocess(["check", bad])
+    assert r.returncode == 0 and "problem: " in r.stdout  # listed, not failed, without --strict
+    r = bake_subprocess(["check", bad, "--strict"])
+    assert "problem(s) under --strict" in one_error_line(r, 4, bad) and "missing.svg" in r.stderr

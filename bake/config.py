@@ -370,7 +370,7 @@ class ExportConfig:
     two_sided: Literal["auto", "yes", "no"] = "auto"
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles, and so is every
-    # face with a BSP tree, a BVH or a list that goes per triangle (tri colors, uvs; docs/formats.md).
+    # face with a BSP tree, a BVH or a list that goes per triangle (tri colors, tri uvs, lightmap uvs; docs/formats.md).
     faces: Literal["triangles", "quads", "ngons"] = "triangles"
     # Positions are rounded to this many significant digits of the model's size: a step of the
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
@@ -990,10 +990,15 @@ def validate(cfg: Config) -> None:
              "must be a file name, not a path")
         need(name.lower() not in RESERVED_OUTPUT_NAMES, key,
              f"'{name}' is a name the bake writes itself ({', '.join(RESERVED_OUTPUT_NAMES)}); choose another")
+    seen: dict[str, tuple[str, str]] = {}
     for f in dataclasses.fields(ListNames):
         name = getattr(cfg.export.names, f.name)
-        need(bool(name.strip()) and name.strip(". ") != "", f"export.names.{_toml_name(f.name)}",
-             f"must be a list name (got {name!r})")
+        key = f"export.names.{_toml_name(f.name)}"
+        need(bool(name.strip()) and name.strip(". ") != "", key, f"must be a list name (got {name!r})")
+        # lists/<name>.txt: names that differ only in case are one file on Windows and macOS
+        other_key, other = seen.setdefault(name.casefold(), (key, name))
+        need(other == name, key, f"'{name}' differs from {other_key} = '{other}' only in case (one list file on "
+                                 "Windows and macOS); choose another")
     for i, lt in enumerate(cfg.lighting.lights):
         need(len(lt.color) == 3, f"lighting.lights[{i}].color", "must be [r, g, b]")
         need(len(lt.direction) == 3, f"lighting.lights[{i}].direction", "must be [x, y, z]")

@@ -219,12 +219,14 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         if spec.name == "import" and scene.n_polygons == 0:
             why = "; ".join(rec.warnings[:3])
             raise InputError("has no faces to bake" + (f" ({why})" if why else ""), path=scene.source.path)
-        if spec.name in ("triangulate", "clean") and scene.triangles is not None and scene.n_triangles == 0:
+        if until is None and spec.name in ("triangulate", "clean") and scene.triangles is not None \
+                and scene.n_triangles == 0:
             # every face had repeated corners or no area: an empty bake is not what was asked for
+            # (`bake inspect`, which stops at clean, shows such a model instead)
             why = "; ".join(rec.warnings[:3])
-            raise InputError(f"has no triangles left to bake after {spec.name} (every face is degenerate: "
-                             f"repeated corners or zero area)" + (f" ({why})" if why else ""),
-                             path=scene.source.path)
+            raise InputError(f"has no triangles left to bake after {spec.name}: every face is degenerate "
+                             "(repeated corners, or an area under mesh.clean.area_tolerance)"
+                             + (f" ({why})" if why else ""), path=scene.source.path)
         if spec.name in ("import", "transform"):
             check_coordinates(scene, spec.name, cfg)
         if not rec.counts_in:

@@ -25,7 +25,8 @@ def baked(tmp_path):
     return model, out
 
 
-@pytest.mark.parametrize("rel", ["lists/tris.txt", "lists/new.d", ".bake-manifest.json", "assets/x.d"])
+@pytest.mark.parametrize("rel", ["lists/tris.txt", "lists/new.d", ".bake-manifest.json", "assets/x.d", "sweeps/x.d",
+                                 ".bake-cache/x.d"])
 def test_a_depfile_over_a_file_the_bake_writes_is_refused(baked, rel):
     model, out = baked
     before = _digests(out)
@@ -82,6 +83,27 @@ def test_a_model_whose_every_face_is_degenerate_exits_3(tmp_path, faces):
     assert len(json.loads((out / "lists.json").read_text())["lists"]["tris"]) == 4
 
 
+def test_inspect_still_shows_a_model_whose_every_face_is_degenerate(tmp_path):
+    obj = tmp_path / "flat.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    r = bake_subprocess(["inspect", obj])
+    assert r.returncode == 0, r.stderr
+    assert "triangles 0, vertices 3" in r.stdout
+
+
+@pytest.mark.parametrize("off", ["export.enabled=false", "export.json=false"])
+def test_a_bake_without_lists_json_still_writes_its_report(tmp_path, off):
+    model = grid_obj(tmp_path / "grid.obj", 2)
+    out = tmp_path / "o"
+    r = bake_subprocess(["run", model, "--out", out, "--quiet", "--set", off])
+    assert r.returncode == 0, r.stderr
+    assert (out / "report.html").is_file() and not (out / "lists.json").exists()
+    page = (out / "report.html").read_bytes()
+    r = bake_subprocess(["report", out])
+    assert r.returncode == 0, r.stderr
+    assert (b"export stage was off" if off.startswith("export.enabled") else b"lists.json was not written") in page
+
+
 @pytest.mark.parametrize("extra, why", [
     (["--set", "lighting.enabled=true", "--set", 'lighting.lights=[{kind="sun"}]'], "'tri colors' goes per triangle"),
     (["--set", "bvh.enabled=true"], "the BVH's triangle numbers"),
@@ -130,7 +152,7 @@ def test_a_blank_list_name_is_refused(baked, value):
 def test_list_names_that_differ_only_in_case_are_refused(baked):
     model, out = baked
     r = bake_subprocess(["run", model, "--out", out, "--set", "export.names.vertices=Tris"])
-    assert "lists 'Tris' and 'tris' map to the same file" in one_error_line(r, 2, "export.names")
+    assert "differs from export.names.vertices = 'Tris' only in case" in one_error_line(r, 2, "export.names.triangles")
 
 
 def test_check_strict_fails_on_a_project_problem(baked, tmp_path):

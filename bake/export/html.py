@@ -433,7 +433,8 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     cfg = report.get("config", {})
     json_name = cfg.get("export", {}).get("json_name", "lists.json")
     has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
-    if not has_json and cfg.get("export", {}).get("json", True):
+    ex = cfg.get("export", {})
+    if not has_json and ex.get("enabled", True) and ex.get("json", True) and report.get("lists"):
         raise InputError(f"{json_name} is missing, though report.json says the bake wrote it (bake the model again)",
                          path=out_dir / json_name)
     lists_doc = _load_json(out_dir, json_name, files) if has_json else {"lists": {}}
@@ -471,7 +472,8 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     if views:
         body.append(_views_section(views, mesh))
     else:
-        why = (f"{json_name} was not written (export.json = false)" if not has_json else
+        why = ("the export stage was off (export.enabled = false)" if not ex.get("enabled", True) else
+               f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
     body += [_textures_section(textures), _stages_section(report), _bsp_section(report), _lists_section(report),

@@ -410,11 +410,10 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         arr = json_array(items, "string" if lst.kind == "string" else "number")
         arrays[lst.name] = arr
         fname = list_file_name(lst.name, items)
-        stem = fname.rsplit(".", 1)[0].lower()  # (Tris.txt and tris.txt are one file on Windows and macOS)
+        stem = fname.rsplit(".", 1)[0]
         if stem in used_files:
-            raise ConfigError(f"lists '{used_files[stem]}' and '{lst.name}' map to the same file "
-                              f"{fname.rsplit('.', 1)[0]}.* (file names that differ only in case are one file on "
-                              "Windows and macOS)", key="export.names")
+            raise ConfigError(f"lists '{used_files[stem]}' and '{lst.name}' map to the same file {stem}.*",
+                              key="export.names")
         used_files[stem] = lst.name
         if cfg.txt:
             files[fname] = list_file_bytes(fname, items)

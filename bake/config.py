@@ -994,7 +994,7 @@ def validate(cfg: Config) -> None:
     for f in dataclasses.fields(ListNames):
         name = getattr(cfg.export.names, f.name)
         key = f"export.names.{_toml_name(f.name)}"
-        need(bool(name.strip()) and name.strip(". ") != "", key, f"must be a list name (got {name!r})")
+        need(name.strip().strip(".") != "", key, f"must be a list name (got {name!r})")
         # lists/<name>.txt: names that differ only in case are one file on Windows and macOS
         other_key, other = seen.setdefault(name.casefold(), (key, name))
         need(other == name, key, f"'{name}' differs from {other_key} = '{other}' only in case (one list file on "

@@ -431,18 +431,18 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     out_dir = Path(out_dir)
     report = _load_json(out_dir, "report.json", files)
     cfg = report.get("config", {})
-    json_name = cfg.get("export", {}).get("json_name", "lists.json")
-    has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
     ex = cfg.get("export", {})
+    json_name = ex.get("json_name", "lists.json")
+    has_json = json_name in files if files is not None else (out_dir / json_name).is_file()
     if not has_json and ex.get("enabled", True) and ex.get("json", True) and report.get("lists"):
         raise InputError(f"{json_name} is missing, though report.json says the bake wrote it (bake the model again)",
                          path=out_dir / json_name)
-    lists_doc = _load_json(out_dir, json_name, files) if has_json else {"lists": {}}
-    lists = lists_doc.get("lists", {}) if isinstance(lists_doc, dict) else None
+    lists: dict = {}
     if has_json:
-        want = set(report.get("lists", {}))
-        if not isinstance(lists, dict) or not want <= set(lists):
-            gone = sorted(want - set(lists)) if isinstance(lists, dict) else []
+        doc = _load_json(out_dir, json_name, files)
+        lists = doc.get("lists") if isinstance(doc, dict) else None
+        gone = sorted(set(report.get("lists", {})) - set(lists)) if isinstance(lists, dict) else None
+        if gone is None or gone:
             raise InputError("does not hold the lists report.json says the bake wrote"
                              + (f" (missing: {', '.join(repr(g) for g in gone[:5])})" if gone else "")
                              + "; bake the model again", path=out_dir / json_name)

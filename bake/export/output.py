@@ -19,7 +19,7 @@ from ..config import RESERVED_OUTPUT_NAMES
 from ..errors import ConfigError
 from ..pipeline import BakeResult
 from . import report as report_mod
-from .write import MANIFEST, Outputs, check_writable_folder, depfile_text
+from .write import Outputs, check_writable_folder, depfile_text
 
 REPORT_FILES = ("report.json", "report.md", "report.html")
 
@@ -61,11 +61,10 @@ def check_paths(out_dir: Path, *, depfile: Path | None = None, inputs: Iterable[
             if p.exists() and depfile.exists() and os.path.samefile(p, depfile):
                 raise ConfigError("refusing to overwrite an input file with the depfile", path=depfile)
         if _inside(depfile, out_dir):
-            # an output named up front, the manifest, or anything in a folder the bake fills
-            # (lists/, assets/, sweeps/, the cache): its files are not all known before the bake
+            # an output named up front, a reserved name (the reports, the manifest) or anything in a
+            # folder the bake fills (lists/, assets/, sweeps/, the cache): not all known before the bake
             rel = depfile.resolve().relative_to(out_dir.resolve())
-            if rel.as_posix() in set(REPORT_FILES) | set(names) | {MANIFEST} or \
-                    (rel.parts and rel.parts[0].lower() in RESERVED_OUTPUT_NAMES) or not rel.parts:
+            if not rel.parts or rel.as_posix() in set(names) or rel.parts[0].lower() in RESERVED_OUTPUT_NAMES:
                 raise ConfigError("--depfile would overwrite an output of the bake (choose a path outside the "
                                   "output folder, or a name the bake does not write)", path=depfile)
 

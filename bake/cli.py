@@ -29,8 +29,9 @@ from .errors import BakeError, ConfigError, InputError, LimitError
 
 
 # --------------------------------------------------------------------------- progress
-# A per-stage bar on stderr for bakes longer than 2 s, on a terminal only (bake/progress.py).
-from .progress import StageProgress as _Progress, stage_count as _stage_count  # noqa: E402
+# A bar on stderr for bakes longer than 2 s on a terminal, a line every 10 s of a long stage elsewhere
+# (bake/progress.py).
+from .progress import StageProgress as _Progress  # noqa: E402
 
 
 def _default_out(target: Path) -> Path:
@@ -67,7 +68,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     _check_output_names(cfg)
     output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
     _check_into(cfg)
-    prog = _Progress(quiet, total=_stage_count(cfg))
+    prog = _Progress(quiet, total=pipeline.stage_count(cfg))
     cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
     cfg.cache.out_dir = out  # and so does the default stage cache
     try:

@@ -100,8 +100,14 @@ class SimplifyConfig:
     # the measured max drops. Each costs about one more stage run (0 = off).
     peak_rounds: int = 1
     # With a triangle target: never accept a result whose measured error (fraction of the
-    # diagonal) exceeds this; stop at more triangles instead and say so (0 = no ceiling).
-    error_ceiling: float = 0.05
+    # diagonal) exceeds this; stop at more triangles instead and say so (0 = no ceiling: the
+    # budget is met, and a result more than 5% of the diagonal off is warned about).
+    error_ceiling: float = 0.0
+    # With a triangle target, what a result with defects (triangles turned against the surface they
+    # stand for, triangles on new non-manifold edges) does: "allow" delivers the budget with the
+    # fewest defects the repairs leave and reports them (warnings, details.defects); "refuse"
+    # backs off to the smallest larger count without any (docs/simplify.md, "Defects").
+    defects: Literal["allow", "refuse"] = "allow"
     preserve_border: bool = True
     preserve_materials: bool = True
     # The symmetric Hausdorff error in the record: a grid of about error_samples points on each

@@ -17,6 +17,7 @@ from typing import Any, Callable, Collection
 import numpy as np
 
 from . import advice
+from . import progress as progress_mod
 from . import config as config_mod
 from .config import Config, ImportJob
 from .errors import BakeError, ConfigError, InputError, StageError
@@ -94,6 +95,11 @@ def stage_names() -> list[str]:
     return [s.name for s in STAGES]
 
 
+def stage_count(cfg: Config) -> int:
+    """How many stages a config runs (the progress bar's length)."""
+    return sum(1 for _, on, _ in plan(cfg) if on)
+
+
 def plan(cfg: Config) -> list[tuple[StageSpec, bool, str]]:
     """Each stage with whether it runs and why (or why not)."""
     out = []
@@ -130,7 +136,8 @@ def finish_cache(result: BakeResult) -> None:
         result.cache_session = None
 
 
-Progress = Callable[[str, str], None]  # (stage name, event: "start" | "done" | "cached")
+# (stage name, event: "start" | "done" | "cached" | "step", and for "step" what the stage does now)
+Progress = Callable[..., None]
 
 
 def run(cfg: Config, *, progress: Progress | None = None, until: str | None = None,
@@ -207,7 +214,8 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         t = time.perf_counter()
         try:
             # (the stages a sweep varies reuse nothing: their seconds are what it measures)
-            with cache_mod.using_memo(memo if spec.name not in recompute else None):
+            steps = None if progress is None else (lambda text, _n=spec.name: progress(_n, "step", text))
+            with cache_mod.using_memo(memo if spec.name not in recompute else None), progress_mod.reporting(steps):
                 scene, rec = fn(scene, sections[i])
         except ConfigError as e:
             raise _in_config_file(e, cfg) from None

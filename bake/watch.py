@@ -133,7 +133,7 @@ def bake_once(target: Path, overrides: list[str], out: Path, *, quiet: bool) -> 
     watch) and the report. Raises BakeError (the files known so far are in ``err.watch``)."""
     from . import pipeline
     from .export import output
-    from .progress import StageProgress, stage_count
+    from .progress import StageProgress
 
     files = {os.path.abspath(target)}
     try:
@@ -144,7 +144,7 @@ def bake_once(target: Path, overrides: list[str], out: Path, *, quiet: bool) -> 
             files.add(os.path.abspath(cfg.export.into))
         cfg.textures.lightmap.out_dir = out
         cfg.cache.out_dir = out
-        prog = StageProgress(quiet, total=stage_count(cfg))
+        prog = StageProgress(quiet, total=pipeline.stage_count(cfg))
         try:
             result = pipeline.run(cfg, progress=prog)
         finally:

@@ -310,6 +310,50 @@ def _bsp_section(report: dict) -> str:
     return f"<h2>BSP: what painter's order costs</h2><table>{body}</table>"
 
 
+def _simplify_section(report: dict) -> str:
+    """What the simplify budget cost: the count against the target, the error, each kind of
+    defect with the share of the surface it covers, what was let go to reach the target, and the
+    parts with the largest error."""
+    st = next((x for x in report.get("stages", []) if x.get("name") == "simplify"), None)
+    d = (st or {}).get("details") or {}
+    if "defects" not in d:
+        return ""
+    acc = st.get("accuracy", {})
+    t_in = (st.get("counts_in") or {}).get("triangles", 0)
+    t_out = (st.get("counts_out") or {}).get("triangles", 0)
+    df = d["defects"]
+    rows = [("triangles", f"{t_in:,} → {t_out:,} (target {d.get('target_triangles', 0):,}; "
+                          f"defects = \"{df.get('policy', '')}\")")]
+    if "hausdorff_max" in acc:
+        rows.append(("error", f"max {acc['hausdorff_max']:.3%} of the diagonal, mean {acc['hausdorff_mean']:.3%}"
+                              + (f"; proven bound {acc['hausdorff_bound_original_to_simplified']:.3%} (original → "
+                                 "simplified)" if "hausdorff_bound_original_to_simplified" in acc else "")))
+    rows.append(("defects", f"{df['flipped_triangles']:,} flipped ({df['flipped_area']:.2%} of the area), "
+                            f"{df['new_nonmanifold_edges']:,} new non-manifold edges "
+                            f"({df['new_nonmanifold_area']:.2%}), {df['new_folds']:,} new folds "
+                            f"({df['folded_area']:.2%})"))
+    lay = d.get("layer")
+    if lay:
+        rows.append(("two-sided and repeated", f"{lay['with_back']:,} triangles had a back (simplified once, "
+                                               f"written twice); {lay['repeated_dropped']:,} repeats dropped"))
+    if d.get("relaxed"):
+        rows.append(("let go to reach the target", ", ".join(d["relaxed"])))
+    parts = d.get("parts") or {}
+    body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in rows)
+    out = f"<h2>Simplify: what the budget cost</h2><table>{body}</table>"
+    if parts.get("count", 0) > 1:
+        prow = "".join(
+            f"<tr><td class=n>{p['part']}</td><td class=n>{p['triangles_in']:,}</td><td class=n>"
+            f"{p['triangles_out']:,}</td><td class=n>{p['size']:.3f}</td><td class=n>{p['error']:.3%}</td>"
+            f"<td>{_esc(p['state'])}</td></tr>" for p in parts.get("worst", [])[:10])
+        out += (f"<p class=sub>{parts['count']:,} parts (pieces joined by edges of two triangles); "
+                f"{parts['dropped']:,} dropped, {parts['collapsed']:,} collapsed. The parts with the largest "
+                "error (size and error in fractions of the model's diagonal):</p>"
+                f"<table><tr><th>part</th><th>triangles in</th><th>out</th><th>size</th><th>error</th><th></th></tr>"
+                f"{prow}</table>")
+    return out
+
+
 def _lists_section(report: dict) -> str:
     lists = report.get("lists", {})
     total = max(sum(v["bytes"] for v in lists.values()), 1)
@@ -476,7 +520,8 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
                f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
-    body += [_textures_section(textures), _stages_section(report), _bsp_section(report), _lists_section(report),
+    body += [_textures_section(textures), _stages_section(report), _simplify_section(report), _bsp_section(report),
+             _lists_section(report),
              _sweeps_section(sweeps, report)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"
             f"<meta name=viewport content='width=device-width,initial-scale=1'><style>{CSS}</style></head>"

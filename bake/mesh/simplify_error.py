@@ -88,6 +88,9 @@ _THREADED = 4096
 _VERIFY_PAIRS = 1_500_000
 # meshes of at most this many triangles are verified by testing every (point, triangle) pair's
 # bounding-sphere bound (vectorised) instead of ball queries
+# distances within this fraction of the diagonal of each other are equal for the verification
+# (float64 rounding of distances computed from coordinates of that size is about 1e-16)
+_ROUNDING = 1e-12
 _EXACT_BRUTE = 20_000
 # a triangle whose double area is below this fraction of the squared bbox diagonal (or whose
 # largest angle has a sine below _SLIVER_SINE) has no reliable normal
@@ -239,6 +242,54 @@ def _kd_query(tree: cKDTree, P: np.ndarray, threaded: bool, **kw):
         return tree.query(P, workers=-1, **kw)
 
 
+# tile_long: triangles whose longest edge is over _TILE_LONG x the median are cut into pieces whose
+# edges are at most that long (at most _TILE_MAX_CUTS parts per edge)
+_TILE_LONG = 4.0
+_TILE_MAX_CUTS = 64
+
+
+def tile_long(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(vertices, triangles, piece -> triangle) where each triangle whose longest edge is over
+    _TILE_LONG times the median longest edge is cut into k x k pieces (k = its longest edge over
+    that length, rounded up: its edges cut into k equal parts, the pieces the triangles of that
+    grid); the others are kept as they are. None for the map when no triangle is long: (V, F)."""
+    T = len(F)
+    if T < 64:
+        return V, F, None
+    C = V[F]
+    longest = np.linalg.norm(C[:, [1, 2, 0]] - C, axis=2).max(axis=1)
+    limit = _TILE_LONG * float(np.median(longest))
+    if not limit > 0:
+        return V, F, None
+    k = np.minimum(np.ceil(longest / limit), _TILE_MAX_CUTS).astype(np.int64)
+    k[~np.isfinite(longest)] = 1
+    if (k <= 1).all():
+        return V, F, None
+    out_v, out_f, out_of = [V], [F[k <= 1]], [np.flatnonzero(k <= 1)]
+    base = len(V)
+    for kk in np.unique(k[k > 1]).tolist():
+        sel = np.flatnonzero(k == kk)
+        i, j = np.meshgrid(np.arange(kk + 1), np.arange(kk + 1), indexing="ij")
+        ok = i + j <= kk
+        i, j = i[ok], j[ok]  # lattice points (i, j): barycentrics ((kk - i - j), i, j) / kk
+        node = np.full((kk + 1, kk + 1), -1, np.int64)
+        node[i, j] = np.arange(len(i))
+        a, b = np.meshgrid(np.arange(kk), np.arange(kk), indexing="ij")
+        up = a + b <= kk - 1
+        down = a + b <= kk - 2
+        pieces = np.concatenate([
+            np.stack([node[a[up], b[up]], node[a[up] + 1, b[up]], node[a[up], b[up] + 1]], axis=1),
+            np.stack([node[a[down] + 1, b[down]], node[a[down] + 1, b[down] + 1], node[a[down], b[down] + 1]],
+                     axis=1)])
+        w = np.stack([kk - i - j, i, j], axis=1) / kk
+        pts = np.einsum("pk,tkd->tpd", w, C[sel]).reshape(-1, 3)
+        out_v.append(pts)
+        out_f.append((pieces[None] + (base + np.arange(len(sel)) * len(i))[:, None, None]).reshape(-1, 3))
+        out_of.append(np.repeat(sel, len(pieces)))
+        base += len(pts)
+    return np.concatenate(out_v), np.concatenate(out_f), np.concatenate(out_of)
+
+
 def _spread10(x: np.ndarray) -> np.ndarray:
     x = (x | (x << 16)) & 0x030000FF
     x = (x | (x << 8)) & 0x0300F00F
@@ -371,13 +422,20 @@ class SurfaceIndex:
         return cand, d2.reshape(m, k)
 
     def _aabb(self):
-        """libigl's AABB tree over the triangles (built on first use)."""
+        """libigl's AABB tree over the triangles (built on first use), and the triangle each of
+        its pieces belongs to (None: the pieces are the triangles). Triangles much longer than
+        most (CAD cylinders' long slivers, fans) are cut into pieces first (:func:`tile_long`):
+        a long triangle's box overlaps everything along it, and a query visits every box that
+        could hold its answer (the 2CylinderEngine's 110k triangles answered 2.3x faster cut, the
+        bunny's were left whole). Distances are to the same surface: the pieces tile it."""
         if self._igl is None:
             import igl
 
             self.V, self.F = np.ascontiguousarray(self.V), np.ascontiguousarray(self.F)
+            Vt, Ft, self._piece_of = tile_long(self.V, self.F)
+            self._tree_mesh = (self.V, self.F) if self._piece_of is None else (Vt, Ft)
             self._igl = igl.AABB()
-            self._igl.init(self.V, self.F)
+            self._igl.init(*self._tree_mesh)
         return self._igl
 
     def distance(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -389,10 +447,11 @@ class SurfaceIndex:
         dist = np.empty(n)
         tri = np.empty(n, np.int64)
         tree = self._aabb()
+        Vt, Ft = self._tree_mesh
         for s in range(0, n, _CHUNK):
-            d2, t, _ = tree.squared_distance(self.V, self.F, np.ascontiguousarray(P[s:s + _CHUNK]))
+            d2, t, _ = tree.squared_distance(Vt, Ft, np.ascontiguousarray(P[s:s + _CHUNK]))
             dist[s:s + len(d2)] = np.sqrt(d2)
-            tri[s:s + len(d2)] = t
+            tri[s:s + len(d2)] = t if self._piece_of is None else self._piece_of[t]
         return dist, tri
 
     def query(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -587,9 +646,12 @@ def _verify(Q: np.ndarray, d: np.ndarray, index: SurfaceIndex, budget: int = _VE
     done, size = 0, 64
     stats: dict = {}
     exact = True
+    # bounds within rounding of the largest exact value cannot beat it by more than rounding
+    # (a flat result on its flat input: every distance about 1e-16, thousands of bounds tied)
+    tie = _ROUNDING * (index.scale if len(index.F) else 0.0)
     while done < len(order):
         blk = order[done:done + size]
-        if best >= d[blk[0]]:
+        if best >= d[blk[0]] - tie:
             break
         if stats.get("pairs", 0) > budget:
             exact = False
@@ -650,6 +712,10 @@ class FlipResult:
     checked: int  # triangles measured by this call (the rest were taken from the previous one)
     suspect: np.ndarray | None = None  # (t,) first-pass verdict (per triangle; reused by re-checks)
     reach: np.ndarray | None = None  # (t,) farthest of a triangle's sample points from the original
+    # the second opinion's pairing, per original triangle: the output triangle it votes for (-1:
+    # not paired yet) and how far its centroid is from the output (reused by re-checks, _confirm)
+    voted: np.ndarray | None = None
+    voted_dist: np.ndarray | None = None
 
 
 def triangle_pattern(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -706,7 +772,8 @@ def flip_check(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, *, samples
     res.checked = int(len(todo))
     if len(todo):
         _first_pass(index_a, corners, todo, res, samples, tol, scale, max_per_triangle)
-    _confirm(index_a, Vo, Fo, res, samples, tol)
+    same = prev is not None and len(prev.corners) == t and prev.voted is not None
+    _confirm(index_a, Vo, Fo, res, samples, tol, prev if same else None, todo)
     return res
 
 
@@ -761,8 +828,45 @@ def _first_pass(index_a: SurfaceIndex, corners: np.ndarray, todo: np.ndarray, re
     res.unreliable[todo] = ~ok
 
 
+def _votes_for(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, orig: np.ndarray, tol: float,
+               prev: FlipResult | None, moved: np.ndarray, res: FlipResult) -> None:
+    """``res.voted`` / ``res.voted_dist`` for the original triangles ``orig``: the output triangle
+    closest to each centroid (best-agreeing among those within ``tol``). From ``prev`` (the same
+    triangles, ``moved`` ones moved) a pairing stands when the triangle it names did not move and
+    no moved triangle came within its distance (then none can be closer): only the others are
+    paired again (a repair or a refine round moves a few triangles of thousands)."""
+    Ta = len(index_a.F)
+    if res.voted is None:
+        res.voted = np.full(Ta, -1, np.int64) if prev is None else prev.voted.copy()
+        res.voted_dist = np.full(Ta, np.inf) if prev is None else prev.voted_dist.copy()
+        if prev is not None and len(moved):
+            known = np.flatnonzero(res.voted >= 0)
+            hit = np.zeros(len(Fo), bool)
+            hit[moved] = True
+            stale = hit[res.voted[known]]
+            d_moved, _ = SurfaceIndex(Vo, Fo[moved], density=0).distance(index_a.centers[known])
+            stale |= d_moved <= res.voted_dist[known] + tol
+            res.voted[known[stale]] = -1
+    todo = orig[res.voted[orig] < 0]
+    if len(todo) == 0:
+        return
+    ib = SurfaceIndex(Vo, Fo, seed=11, density=0)
+    n_out = ib.normals
+    a_n = index_a.normals[:, todo]
+    cand, d2 = ib._candidates(index_a.centers[todo])
+    d = np.sqrt(d2)
+    valid = cand >= 0
+    ci = np.where(valid, cand, 0)
+    dmin = d.min(axis=1, keepdims=True)
+    near = valid & (d <= dmin + tol)
+    dots = a_n[0][:, None] * n_out[0][ci] + a_n[1][:, None] * n_out[1][ci] + a_n[2][:, None] * n_out[2][ci]
+    j = np.argmax(np.where(near, dots, -np.inf), axis=1)
+    res.voted[todo] = ci[np.arange(len(todo)), j]
+    res.voted_dist[todo] = dmin[:, 0]
+
+
 def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipResult, samples: int,
-             tol: float) -> None:
+             tol: float, prev: FlipResult | None = None, moved: np.ndarray | None = None) -> None:
     """Second opinion on the suspects, from the other side: the original triangles around a
     suspect vote (centroids, area-weighted, capped at one sample's share) for the output
     triangle closest to them (best-agreeing among those within ``tol``). A suspect is flipped
@@ -772,6 +876,9 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     and stays flipped."""
     sus = np.flatnonzero(res.suspect)
     res.flipped[:] = False
+    if prev is not None:  # (the pairings carry on even through a check without suspects)
+        _votes_for(index_a, Vo, Fo, np.zeros(0, np.int64), tol, prev,
+                   np.zeros(0, np.int64) if moved is None else moved, res)
     if len(sus) == 0:
         return
     cen, rad = bounding_spheres(res.corners[sus])
@@ -780,17 +887,9 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     if len(orig) == 0:
         res.flipped[sus] = True
         return
-    ib = SurfaceIndex(Vo, Fo, seed=11, density=0)
-    n_out = ib.normals
+    _votes_for(index_a, Vo, Fo, orig, tol, None, np.zeros(0, np.int64), res)
     a_n = index_a.normals[:, orig]
-    cand, d2 = ib._candidates(index_a.centers[orig])
-    d = np.sqrt(d2)
-    valid = cand >= 0
-    ci = np.where(valid, cand, 0)
-    near = valid & (d <= d.min(axis=1, keepdims=True) + tol)
-    dots = a_n[0][:, None] * n_out[0][ci] + a_n[1][:, None] * n_out[1][ci] + a_n[2][:, None] * n_out[2][ci]
-    j = np.argmax(np.where(near, dots, -np.inf), axis=1)
-    chosen = ci[np.arange(len(orig)), j]
+    chosen = res.voted[orig]
     share = index_a.total_area / max(samples, 1)
     w = np.minimum(index_a.area[orig], share)
     pos = np.full(len(Fo), -1, np.int64)
@@ -799,5 +898,7 @@ def _confirm(index_a: SurfaceIndex, Vo: np.ndarray, Fo: np.ndarray, res: FlipRes
     votes = np.zeros((len(sus), 3))
     np.add.at(votes, pos[chosen[mine]], (a_n[:, mine] * w[mine]).T)
     got = np.linalg.norm(votes, axis=1) > 0
-    against = np.einsum("ij,ij->i", votes, n_out[:, sus].T) < 0.0
+    C = res.corners[sus]
+    n_sus = np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0])  # (only its sign against the votes counts)
+    against = np.einsum("ij,ij->i", votes, n_sus) < 0.0
     res.flipped[sus] = ~got | against

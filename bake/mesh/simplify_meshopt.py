@@ -23,7 +23,7 @@ import numpy as np
 SIMPLIFY_LOCK_BORDER = 1
 SIMPLIFY_ERROR_ABSOLUTE = 4
 
-__all__ = ["available", "version", "simplify", "SIMPLIFY_LOCK_BORDER", "SIMPLIFY_ERROR_ABSOLUTE"]
+__all__ = ["available", "version", "simplify", "simplify_sloppy", "SIMPLIFY_LOCK_BORDER", "SIMPLIFY_ERROR_ABSOLUTE"]
 
 
 @lru_cache(maxsize=1)
@@ -58,6 +58,10 @@ def _lib() -> ctypes.CDLL | None:
         P(ctypes.c_float),  # result_error (may be NULL)
     ]
     f.restype = ctypes.c_size_t
+    g = lib.meshopt_simplifySloppy
+    g.argtypes = [P(ctypes.c_uint), P(ctypes.c_uint), ctypes.c_size_t, P(ctypes.c_float), ctypes.c_size_t,
+                  ctypes.c_size_t, ctypes.c_size_t, ctypes.c_float, P(ctypes.c_float)]
+    g.restype = ctypes.c_size_t
     return lib
 
 
@@ -73,6 +77,37 @@ def version() -> str | None:
         return None
 
 
+def _float32(positions: np.ndarray) -> np.ndarray:
+    """Positions centred on their box (a small model far from the origin keeps its digits) as
+    contiguous float32, which the library reads."""
+    p64 = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p64):
+        p64 = p64 - 0.5 * (p64.min(axis=0) + p64.max(axis=0))
+    pos = np.ascontiguousarray(p64, dtype=np.float32)
+    if len(pos) and not np.isfinite(pos).all():
+        raise ValueError("positions do not fit in float32")
+    return pos
+
+
+def simplify_sloppy(positions: np.ndarray, triangles: np.ndarray, target_triangles: int) -> tuple[np.ndarray, float]:
+    """meshoptimizer's vertex-clustering simplifier: reaches about ``target_triangles`` whatever
+    the topology (seams, borders, soups of separate triangles), at the cost of merging vertices
+    that are near each other without regard to what they belong to. Returns (triangles indexing
+    ``positions``, the library's error estimate relative to the mesh extent)."""
+    lib = _lib()
+    if lib is None:
+        raise RuntimeError("meshoptimizer is not installed")
+    P = ctypes.POINTER
+    idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
+    pos = _float32(positions)
+    dst = np.empty(max(len(idx), 3), dtype=np.uint32)
+    err = ctypes.c_float(0.0)
+    n = lib.meshopt_simplifySloppy(dst.ctypes.data_as(P(ctypes.c_uint)), idx.ctypes.data_as(P(ctypes.c_uint)),
+                                   len(idx), pos.ctypes.data_as(P(ctypes.c_float)), len(pos), 12,
+                                   int(max(0, target_triangles)) * 3, ctypes.c_float(1e30), ctypes.byref(err))
+    return dst[:n].reshape(-1, 3).astype(np.int64), float(err.value)
+
+
 def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int, *,
              target_error: float = 1e30, absolute_error: bool = False, lock: np.ndarray | None = None,
              lock_border: bool = False, attributes: np.ndarray | None = None,
@@ -86,12 +121,7 @@ def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int
         raise RuntimeError("meshoptimizer is not installed")
     P = ctypes.POINTER
     idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
-    p64 = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    if len(p64):  # centred before the float32 cast: a small model far from the origin keeps its digits
-        p64 = p64 - 0.5 * (p64.min(axis=0) + p64.max(axis=0))
-    pos = np.ascontiguousarray(p64, dtype=np.float32)
-    if len(pos) and not np.isfinite(pos).all():
-        raise ValueError("positions do not fit in float32")
+    pos = _float32(positions)
     dst = np.empty(max(len(idx), 3), dtype=np.uint32)
     if attributes is not None:
         attr = np.ascontiguousarray(np.asarray(attributes, np.float64).reshape(len(pos), -1), dtype=np.float32)

@@ -193,7 +193,10 @@ def test_max_error_mode_meets_the_bound():
 @pytest.mark.parametrize("method", ["meshopt", "fast", "quality"])
 def test_material_edges_kept_and_attributes_carried(method):
     sc = uv_sphere_scene(two_materials=True)
-    out, rec = S.stage(sc, cfg(method=method, target_ratio=0.1))
+    # (defects = "refuse": what each method keeps when nothing is let go; MeshLab leaves the
+    # triangles along the edge out of its selection and stops at 902 for 512, where the default
+    # lets the material edge go to meet the budget: test_budget_met_by_letting_edges_go)
+    out, rec = S.stage(sc, cfg(method=method, target_ratio=0.1, defects="refuse"))
     out.validate()
     assert rec.accuracy["flipped_triangles"] == 0
     # 1. no triangle crosses the material edge: every corner of a triangle is either on the
@@ -276,7 +279,8 @@ def test_pipeline_runs_it_only_when_enabled():
 ])
 def test_hard_cases(parts, ratio):
     sc = load_corpus(*parts)
-    out, rec = S.stage(sc, cfg(target_ratio=ratio, fit_iterations=0, error_samples=2000))
+    # (error_ceiling 5%: what keeps the flat walls below, where the default meets the budget)
+    out, rec = S.stage(sc, cfg(target_ratio=ratio, fit_iterations=0, error_samples=2000, error_ceiling=0.05))
     out.validate()
     assert np.isfinite(out.positions).all()
     # flips and new non-manifold edges: none, or the record says how many (CSG slivers and
@@ -380,7 +384,8 @@ def test_backing_off_to_the_input_returns_the_input(monkeypatch, stuck):
         lib = S.simplify_meshopt.simplify
         monkeypatch.setattr(S.simplify_meshopt, "simplify",
                             lambda V, F, target, **k: (F.copy(), 0.0) if target > 0.95 * len(F) else lib(V, F, target, **k))
-    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5))  # the defaults
+    # the defaults, with today's back-off (defects = "allow" delivers the budget instead)
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5, defects="refuse"))
     assert out.n_triangles == T0
     got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(T0, -1), axis=0)
     want = np.sort(np.sort(sc.positions[sc.triangles], axis=1).reshape(T0, -1), axis=0)
@@ -422,7 +427,8 @@ def test_refused_results_are_not_measured(monkeypatch, where):
             state["measured"].append((_name, state["peak"]))
             return _fn(*a, **k)
         monkeypatch.setattr(S, name, counted)
-    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
+    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000,
+                                                        defects="refuse"))
     if where == "first":
         # backed off all the way to the input, which needs no measure (its error is 0)
         assert out.n_triangles == T0 and rec.details["backed_off_from"] == int(round(0.1 * T0))
@@ -485,9 +491,9 @@ def test_error_ceiling_backs_off_to_more_triangles():
 
 @pytest.mark.corpus
 @pytest.mark.slow
-def test_house_backs_off_with_the_default_settings():
+def test_house_backs_off_when_defects_are_refused():
     sc = load_corpus("house_max2obj_walls", "regr01.obj")
-    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.3))
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.3, defects="refuse"))
     out.validate()
     assert out.n_triangles <= sc.n_triangles
     assert rec.accuracy["flipped_triangles"] == 0 and rec.accuracy["new_nonmanifold_edges"] == 0
@@ -535,10 +541,12 @@ def test_phase_seconds_count_every_attempt(monkeypatch):
 def test_nothing_to_collapse_returns_the_input_without_rounds():
     """A box cannot lose a triangle (every collapse would fold a face): the library hands back
     the 12 triangles, and the stage returns the input itself (error 0) instead of fitting,
-    measuring and refining a copy of it (0.5 s on a 12-triangle box before)."""
+    measuring and refining a copy of it (0.5 s on a 12-triangle box before). (With defects =
+    "refuse": the default meets the budget by clustering, test_simplify_messy.py.)"""
     m = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
     V, F = np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64)
-    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.5))
+    out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.5, defects="refuse",
+                                                        error_ceiling=0.05))
     assert out.n_triangles == 12
     got = np.sort(np.sort(out.positions[out.triangles], axis=1).reshape(12, -1), axis=0)
     want = np.sort(np.sort(V[F], axis=1).reshape(12, -1), axis=0)

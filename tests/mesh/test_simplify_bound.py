@@ -248,7 +248,7 @@ def test_the_bound_covers_what_a_sparse_sample_misses():
 
 @pytest.mark.corpus
 @pytest.mark.slow
-def test_csg_model_at_two_percent_finds_the_peak_the_sample_missed():
+def test_csg_model_at_two_percent_finds_the_peak_the_sample_missed(monkeypatch):
     """boolean.glb at 2%: the sampled measure put the original -> simplified max 7.6% below the
     independent one (a peak near the tip of a 1.0 x 0.022 sliver, between grid points). Proving
     the bound cuts down to it: the stage's figure is within 2% of the reference or above it."""
@@ -256,7 +256,13 @@ def test_csg_model_at_two_percent_finds_the_peak_the_sample_missed():
 
     sc = pipeline.run(pipeline.load_config_for(corpus_path("boolean_csg_slivers", "boolean.glb")),
                       until="clean").scene
-    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.02))
+    # The result this peak was found on (3,542 triangles): defects refused under a 5% ceiling, the
+    # parts welded where they touch, as the stage had them then (the default meets the budget, and
+    # parts that keep their own vertices back off to 2,020 triangles, whose sample finds its peak)
+    real = S.parts
+    monkeypatch.setattr(S, "parts", lambda F, n: real(F, n)[:2] + (False,))
+    out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.02, defects="refuse", error_ceiling=0.05))
+    assert out.n_triangles == 3542
     diag = sc.scale()
     ref = hausdorff_reference(sc.positions, sc.triangles, out.positions, out.triangles, samples=100_000, rounds=5)
     ours = rec.accuracy["hausdorff_max_original_to_simplified"] * diag

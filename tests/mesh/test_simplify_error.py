@@ -333,6 +333,33 @@ def test_recheck_measures_only_changed_triangles_and_agrees_with_a_full_check():
     assert np.array_equal(again.ref, full.ref) and np.array_equal(again.under, full.under)
 
 
+def test_recheck_pairs_again_only_what_a_move_can_change():
+    """The second opinion's pairing of original triangles with output triangles carries on
+    through re-checks: after a few vertices move, the pairings a moved triangle could change are
+    made again, and every pairing and verdict is the full check's (many flips, so many pairings)."""
+    Va, Fa = bumpy(3)
+    ia = SurfaceIndex(Va, Fa)
+    Vo, Fo = bumpy(2, amp=0.2)
+    rng = np.random.default_rng(4)
+    Vo = Vo.copy()
+    Vo[rng.choice(len(Vo), 30, replace=False)] *= -0.3  # many triangles turned over
+    first = flip_check(ia, Vo, Fo)
+    assert first.flipped.sum() > 20
+    for k in range(3):
+        V2 = Vo.copy()
+        V2[rng.choice(len(Vo), 5, replace=False)] *= 0.9
+        again = flip_check(ia, V2, Fo, prev=first)
+        full = flip_check(ia, V2, Fo)
+        assert np.array_equal(again.flipped, full.flipped)
+        # the pairings carried over are the full check's, but where its candidate search (the
+        # KD-tree's nearest sample points, not every triangle) sees a moved triangle's samples
+        # crowd out another: one of 1,280 here
+        known = np.flatnonzero((again.voted >= 0) & (full.voted >= 0))
+        assert len(known) > 1000
+        assert np.mean(again.voted[known] == full.voted[known]) > 0.99
+        first, Vo = again, V2
+
+
 def test_suspect_between_two_sheets_is_judged_by_what_it_stands_for():
     """A triangle inside a thin slab, nearer its bottom sheet but standing for the finely cut
     top (the original triangles it is closest to face up, as it does): the first pass suspects

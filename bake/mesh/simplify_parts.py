@@ -74,12 +74,17 @@ def fold_layer(F: np.ndarray) -> Layer:
         z = np.zeros(0, np.int64)
         return Layer(z, z.copy(), np.zeros((0, 3), np.int64), 0)
     s = np.sort(F, axis=1)
-    even = _even(F, s)
-    _, first, group = np.unique(s, axis=0, return_index=True, return_inverse=True)
+    n = int(s[:, 2].max()) + 1
+    if n < 2_000_000:  # one integer per set of corners (n**3 < 2**63): a 1-D unique, 5x faster
+        key = (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+        _, first, group = np.unique(key, return_index=True, return_inverse=True)
+    else:
+        _, first, group = np.unique(s, axis=0, return_index=True, return_inverse=True)
     group = group.reshape(-1)
     if len(first) == T:  # every set of corners once: the layer is the input
         ids = np.arange(T)
         return Layer(ids, np.full(T, -1, np.int64), np.zeros((T, 3), np.int64), 0)
+    even = _even(F, s)
     front = np.sort(first)
     opposite = even != even[first][group]
     # the first triangle of each group in the opposite order (np.unique keeps first occurrences)

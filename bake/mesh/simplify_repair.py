@@ -623,8 +623,17 @@ def folds(V: np.ndarray, F: np.ndarray, dot: float = FOLD_DOT) -> np.ndarray:
     order = np.argsort(key, kind="stable")
     ks = key[order]
     # every pair of half-edges on the same edge (edges with more than two triangles: each pair)
-    i = np.flatnonzero(ks[1:] == ks[:-1])
-    t, u = order[i] // 3, order[i + 1] // 3
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    sizes = np.diff(np.r_[starts, len(ks)])
+    ts, us = [], []
+    for k in np.unique(sizes[sizes >= 2]).tolist():  # (a few distinct sizes: 2, and 3 or 4 where non-manifold)
+        s0 = starts[sizes == k]
+        i, j = np.triu_indices(k, 1)
+        ts.append(order[(s0[:, None] + i[None]).ravel()] // 3)
+        us.append(order[(s0[:, None] + j[None]).ravel()] // 3)
+    if not ts:
+        return np.zeros((0, 2), np.int64)
+    t, u = np.concatenate(ts), np.concatenate(us)
     N = _normals(V, F)
     ln = np.linalg.norm(N, axis=1)
     Nu = np.divide(N, ln[:, None], out=np.zeros_like(N), where=ln[:, None] > 0)

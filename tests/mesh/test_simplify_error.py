@@ -333,6 +333,37 @@ def test_recheck_measures_only_changed_triangles_and_agrees_with_a_full_check():
     assert np.array_equal(again.ref, full.ref) and np.array_equal(again.under, full.under)
 
 
+def test_long_triangles_are_tiled_for_the_tree_and_distances_stay_exact():
+    """The distance index cuts triangles far longer than most into pieces for libigl's tree
+    (tile_long): the pieces cover each triangle exactly (areas add up, every piece inside its
+    triangle), and distances and closest triangles are the brute force's over the whole ones."""
+    from bake.mesh.simplify_error import tile_long, triangle_areas
+
+    V, F = bumpy(2)
+    # a fan of long slivers beside it, like a CAD cylinder's cap
+    n = 40
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.stack([3 + 2.5 * np.cos(ang), 2.5 * np.sin(ang), np.full(n, 0.3)], 1)
+    Vf = np.concatenate([V, ring, [[3.0, 0.0, 0.3]]])
+    c = len(Vf) - 1
+    Ff = np.concatenate([F, np.stack([np.full(n, c), len(V) + np.arange(n), len(V) + (np.arange(n) + 1) % n], 1)])
+    Vt, Ft, of = tile_long(Vf, Ff)
+    assert of is not None and len(Ft) > len(Ff) and set(of[len(F):].tolist()) <= set(range(len(Ff)))
+    np.testing.assert_allclose(np.bincount(of, weights=triangle_areas(Vt, Ft), minlength=len(Ff)),
+                               triangle_areas(Vf, Ff), rtol=1e-12)
+    assert (np.bincount(of, minlength=len(Ff))[:len(F)] == 1).all()  # the bumpy sphere's are whole
+    P = np.random.default_rng(2).uniform(-1.5, 5.5, size=(400, 3))
+    d, tri = SurfaceIndex(Vf, Ff).distance(P)
+    np.testing.assert_allclose(d, brute_distance(P, Vf, Ff), atol=1e-12)
+    np.testing.assert_allclose(brute_distance_to(P, Vf, Ff[tri]), d, atol=1e-12)
+
+
+def brute_distance_to(P: np.ndarray, V: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Distance from each point to its own triangle (``tris[i]`` for ``P[i]``)."""
+    q = trimesh.triangles.closest_point(V[tris], P)
+    return np.linalg.norm(q - P, axis=1)
+
+
 def test_recheck_pairs_again_only_what_a_move_can_change():
     """The second opinion's pairing of original triangles with output triangles carries on
     through re-checks: after a few vertices move, the pairings a moved triangle could change are

@@ -75,6 +75,23 @@ def test_parts_join_through_two_triangle_edges_only():
     assert part.tolist() == sorted(part.tolist())  # numbered by first triangle
 
 
+def test_folds_count_every_pair_on_a_non_manifold_edge():
+    """Three or four triangles on one edge (what a collapsed thin part leaves): every pair of
+    them facing against each other is a fold, as a loop over all pairs counts them."""
+    from bake.mesh.simplify_repair import folds
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        k = int(rng.integers(3, 6))
+        ang = rng.uniform(0, 2 * np.pi, k)
+        V = np.concatenate([[[0, 0, 0], [0, 0, 1.0]], np.stack([np.cos(ang), np.sin(ang), rng.uniform(0, 1, k)], 1)])
+        F = np.array([[0, 1, 2 + i] if rng.random() < 0.5 else [1, 0, 2 + i] for i in range(k)])
+        n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        want = {(i, j) for i in range(k) for j in range(i + 1, k) if n[i] @ n[j] < -0.9}
+        assert {tuple(p) for p in folds(V, F).tolist()} == want
+
+
 def test_two_sided_sheet_is_simplified_once_and_written_with_its_back():
     """A sheet written twice (front and back, each with its own material and UVs): the output
     has every front triangle's reverse with the back's material and the back's UVs, and meets the

@@ -465,7 +465,8 @@ def derive(result: dict) -> None:
     result["before_after"] = [
         {"model": r["model"], "ratio": r["ratio"], "triangles_out": r["triangles_out"],
          "stage_seconds": r["stage_seconds"], "reported_max": r["reported_max"], "reference_max": r["reference_max"],
-         "folds": r["folds_independent"], "before_stage_seconds": r["before"]["stage_seconds"],
+         "folds": r["folds_independent"], "before_triangles_out": r["before"]["triangles_out"],
+         "before_stage_seconds": r["before"]["stage_seconds"],
          "before_reported_max": r["before"]["reported_max"], "before_reference_max": r["before"]["reference_max"],
          "before_reported_over_reference": r["before"]["reported_over_reference"],
          "before_reported_exact": r["before"]["reported_exact"], "before_folds": r["before"]["folds_independent"],

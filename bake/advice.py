@@ -24,6 +24,7 @@ from .scene import Scene
 
 BSP_INFLATION_WARN = 1.25  # BSP output past this x the simplify budget is worth a warning
 BSP_LARGE_INPUT = 20_000  # triangles: a painter's engine in Scratch draws a few thousand
+SIMPLIFY_MISS = 0.02  # simplify above its target by more than this did not reach it
 
 
 def after_stage(name: str, cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
@@ -67,10 +68,19 @@ def _bsp(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]
     if budget is not None:
         asked, key = budget
         if n_out > BSP_INFLATION_WARN * asked:
-            aim = max(1, int(round(asked * asked / max(n_out, 1), -1 if asked < 1000 else -2)))
-            rec.warn(f"BSP splits took the triangles from {n_in:,} to {n_out:,}, {n_out / asked:.1f}x the "
-                     f"{asked:,} asked by {key}; to end near {asked:,}, aim simplify lower (at the same inflation, "
-                     f"mesh.simplify.target_triangles = {aim}) or raise bsp.split_weight to split less")
+            said = (f"BSP splits took the triangles from {n_in:,} to {n_out:,}, {n_out / asked:.1f}x the {asked:,} "
+                    f"asked by {key}")
+            simp = next(r for r in records if r.name == "simplify")
+            got = int(simp.counts_out.get("triangles", n_in))
+            if got > (1 + SIMPLIFY_MISS) * asked:
+                # a lower target cannot help a stage that did not reach this one
+                rec.warn(f"{said}; simplify itself stopped at {got:,} (its warnings say why: "
+                         "mesh.simplify.defects = \"refuse\", an error_ceiling or seams it kept), so a lower "
+                         "target changes nothing there: raise bsp.split_weight to split less")
+            else:
+                aim = max(1, int(round(asked * asked / max(n_out, 1), -1 if asked < 1000 else -2)))
+                rec.warn(f"{said}; to end near {asked:,}, aim simplify lower (at the same inflation, "
+                         f"mesh.simplify.target_triangles = {aim}) or raise bsp.split_weight to split less")
     elif not any(r.name == "simplify" for r in records) and n_in > BSP_LARGE_INPUT:
         rec.warn(f"BSP of {n_in:,} triangles ({rec.seconds:.0f} s, {n_out:,} triangles after splits): a painter's "
                  "engine in Scratch draws a few thousand; simplify first (mesh.simplify.enabled = true, "

@@ -79,8 +79,8 @@ SUBDIR = Path(".bake-cache") / "stages"
 LISTED_SUFFIXES = frozenset({".mtl", ".bin", ".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tga", ".webp",
                              ".tif", ".tiff", ".ktx2", ".dds", ".obj", ".gltf", ".glb"})
 # libraries whose results end up in a scene
-_LIBRARIES = ("numpy", "scipy", "pillow", "trimesh", "embreex", "fast-simplification", "pymeshlab", "libigl",
-              "meshoptimizer", "xatlas", "pygltflib", "DracoPy", "mapbox-earcut")
+_LIBRARIES = ("numpy", "scipy", "pillow", "embreex", "fast-simplification", "pymeshlab", "libigl",
+              "meshoptimizer", "xatlas", "DracoPy", "mapbox-earcut")
 
 
 class CacheError(Exception):

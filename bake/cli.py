@@ -23,9 +23,12 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable
 
-from . import __version__
+# the command's start, as early as the process can say (its imports so far are the standard library's)
+_STARTED = time.perf_counter()
+
+from . import __version__  # noqa: E402
 from . import config as config_mod
-from .errors import BakeError, ConfigError, InputError, LimitError
+from .errors import BakeError, ConfigError, InputError, LimitError, StageError
 
 
 # --------------------------------------------------------------------------- progress
@@ -79,7 +82,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     finally:
         prog.stop()
     if not quiet:
-        for line in report.summary_lines(rep):
+        for line in report.summary_lines(rep, command_seconds=time.perf_counter() - _STARTED):
             print(line)
         for line in _wrote_lines(out, rep, cfg):
             print(line)
@@ -93,6 +96,10 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
         if problems:
             what.append(f"{len(problems)} problem(s) under --strict, first: {problems[0]['stage']}: "
                         f"{problems[0]['message']}")
+        failed = [p for p in problems if p.get("failed")]
+        if failed:  # a part of a stage failed on valid input: exit 5, as a stage that stops the bake
+            raise StageError(f"{len(failed)} part(s) of a stage failed under --strict, first: {failed[0]['stage']}: "
+                             f"{failed[0]['message']}; see {out / 'report.md'}")
         if what:
             raise LimitError("; ".join(what) + f"; see {out / 'report.md'}")
     return rep
@@ -249,7 +256,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     key, values = sweep_mod.parse_vary(args.vary)
     reference = None
     if args.reference is not None:
-        rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}")
+        rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}", "--reference")
         reference = rvals[0]
     out_dir = Path(args.out) if args.out else _default_out(target)
     cfg.cache.out_dir = out_dir  # the sweep reuses (and fills) the bake's stage cache
@@ -408,6 +415,8 @@ def cmd_watch(args: argparse.Namespace) -> int:
     target = Path(args.target)
     if not target.exists():
         raise InputError("file not found", path=target)
+    if not (args.debounce >= 0 and args.debounce != float("inf")):  # (NaN fails both)
+        raise ConfigError(f"--debounce expects seconds >= 0, got {args.debounce}")
     out = Path(args.out) if args.out else _default_out(target)
     return watch.watch(target, args.set, out, quiet=args.quiet, debug=getattr(args, "debug", False),
                        debounce=args.debounce)

@@ -279,8 +279,10 @@ class LightmapConfig:
     is what fills it with light."""
 
     enabled: bool = False
-    # xatlas packing: atlas side in texels (xatlas may come out a few % larger); texels per
-    # model unit (0 = xatlas chooses so the charts fit the resolution); texels between charts.
+    # xatlas packing: the atlas's longer side in texels, at most this (xatlas grows the atlas by
+    # the padding, so it is asked again for less until it fits); texels per model unit (0 = xatlas
+    # chooses so the charts fit the resolution; > 0: one run, the atlas may be larger); texels
+    # between charts.
     resolution: int = 256
     texels_per_unit: float = 0.0
     padding: int = 2
@@ -309,7 +311,9 @@ class LightmapConfig:
 
 @dataclass
 class TexturesConfig:
-    enabled: bool = False
+    # "auto": on when the model's materials name a texture (or textures.texture or the lightmap
+    # asks for the stage); else the stage is reported as skipped, with why
+    enabled: bool | Literal["auto"] = "auto"
     # An image for every material that has no texture (a model shipped without its .mtl, like
     # spot); relative paths are relative to the model's folder. "" = none.
     texture: str = ""
@@ -665,11 +669,28 @@ class _Where:
         return ConfigError(msg, path=self.path, line=self.line_of(key), key=key)
 
 
+_PLURAL = {"int": "integers", "float": "numbers", "str": "strings", "bool": "true or false values"}
+
+
 def _type_name(t: Any) -> str:
+    if get_origin(t) in (Union, types.UnionType):
+        words: list[str] = []
+        for a in get_args(t):
+            if a is bool:
+                words += ["true", "false"]
+            elif get_origin(a) is Literal:
+                words += [repr(c) for c in get_args(a)]
+            elif a is not type(None):
+                words.append(_type_name(a))
+        return ", ".join(words[:-1]) + " or " + words[-1] if len(words) > 1 else "".join(words)
     if get_origin(t) is Literal:
         return "one of " + ", ".join(repr(a) for a in get_args(t))
     if get_origin(t) in (list, typing.List):
         (inner,) = get_args(t) or (Any,)
+        if get_origin(inner) is Literal:
+            return "a list of values from " + ", ".join(repr(a) for a in get_args(inner))
+        if isinstance(inner, type) and inner.__name__ in _PLURAL:
+            return f"a list of {_PLURAL[inner.__name__]}"
         return f"a list of {_type_name(inner)}"
     if isinstance(t, type):
         return {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false"}.get(
@@ -677,13 +698,38 @@ def _type_name(t: Any) -> str:
     return str(t)
 
 
-def _convert(value: Any, t: Any, key: str, where: _Where) -> Any:
+def _list_expected(t: Any, key: str, value: Any, example: Any) -> str:
+    """What a list-typed key expects, said so a reader can write it: an array of tables as its
+    double-bracket headers, a list of numbers with an example in the shape of its default."""
+    (inner,) = get_args(t) or (Any,)
+    if dataclasses.is_dataclass(inner):
+        one = key.rsplit(".", 1)[-1].rstrip("s") or "entry"
+        got = f"a single [{key}] table" if isinstance(value, dict) else f"{value!r}"
+        return (f"an array of tables: each {one} is written under its own [[{key}]] header (double brackets); "
+                f"got {got}")
+    such = ""
+    numbers = inner in (int, float)
+    if not isinstance(value, (list, dict)):  # one value where a list goes: the list it may have meant
+        such = f" such as {[value] * len(example) if numbers and isinstance(example, list) and example else [value]!r}"
+    elif isinstance(example, list) and example:
+        such = f" such as {example!r}"
+    return f"{_type_name(t)}{such}, got {value!r}"
+
+
+def _convert(value: Any, t: Any, key: str, where: _Where, example: Any = None) -> Any:
     origin = get_origin(t)
     if origin in (Union, types.UnionType):
         args = [a for a in get_args(t) if a is not type(None)]
         if value is None:
             return None
-        return _convert(value, args[0], key, where)
+        if len(args) == 1:
+            return _convert(value, args[0], key, where)
+        for a in args:  # (bool | Literal["auto"]: the first that takes the value)
+            try:
+                return _convert(value, a, key, where)
+            except ConfigError:
+                continue
+        raise where.error(key, f"expected {_type_name(t)}, got {value!r}")
     if origin is Literal:
         choices = get_args(t)
         if value not in choices:
@@ -694,7 +740,7 @@ def _convert(value: Any, t: Any, key: str, where: _Where) -> Any:
     if origin in (list, typing.List):
         (inner,) = get_args(t) or (Any,)
         if not isinstance(value, list):
-            raise where.error(key, f"expected {_type_name(t)}, got {type(value).__name__} {value!r}")
+            raise where.error(key, "expected " + _list_expected(t, key, value, example))
         return [_convert(v, inner, f"{key}[{i}]", where) for i, v in enumerate(value)]
     if dataclasses.is_dataclass(t):
         if not isinstance(value, dict):
@@ -754,7 +800,7 @@ def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) 
         if dataclasses.is_dataclass(t) and isinstance(value, dict):
             setattr(obj, attr, _build(t, value, key + ".", where, base=getattr(obj, attr)))
         else:
-            setattr(obj, attr, _convert(value, t, key, where))
+            setattr(obj, attr, _convert(value, t, key, where, example=getattr(obj, attr, None)))
             where.given[key] = where.origin
     return obj
 
@@ -949,6 +995,7 @@ def validate(cfg: Config) -> None:
         if not cond:
             raise error_at(cfg, key, msg)
 
+    need(cfg.import_.scene >= -1, "import.scene", "must be a scene number >= 0, or -1 for the file's default scene")
     need(cfg.transform.scale > 0, "transform.scale", "must be > 0")
     need(cfg.transform.fit >= 0, "transform.fit", "must be >= 0")
     need(cfg.mesh.clean.weld_tolerance >= 0, "mesh.clean.weld_tolerance", "must be >= 0")
@@ -996,6 +1043,10 @@ def validate(cfg: Config) -> None:
              "must be a file name, not a path")
         need(name.lower() not in RESERVED_OUTPUT_NAMES, key,
              f"'{name}' is a name the bake writes itself ({', '.join(RESERVED_OUTPUT_NAMES)}); choose another")
+        suffix = ".json" if key == "export.json_name" else ".sb3"
+        need(not name or (name.lower().endswith(suffix) and not name.startswith(".")), key,
+             f"must be a visible file name ending in {suffix} (got '{name}': Scratch and the summary look for "
+             f"{suffix} files)")
     seen: dict[str, tuple[str, str]] = {}
     for f in dataclasses.fields(ListNames):
         name = getattr(cfg.export.names, f.name)

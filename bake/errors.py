@@ -11,6 +11,7 @@ Exit statuses (documented in README.md):
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 
@@ -18,11 +19,16 @@ class BakeError(Exception):
     """An error with a place. ``str(err)`` is the one-line message shown to the user."""
 
     exit_code = 1
+    # the model cannot be baked whatever its files come to hold (a format bake does not read, a
+    # path that is no file): `bake watch` stops on such an error in its first bake
+    unwatchable = False
 
     def __init__(self, message: str, *, path: str | Path | None = None, line: int | None = None,
-                 key: str | None = None, origin: str | None = None):
+                 key: str | None = None, origin: str | None = None, unwatchable: bool = False):
+        self.unwatchable = unwatchable
         self.message = message  # what was wrong, without the place
-        self.path = Path(path) if path is not None else None
+        # files are named by their absolute paths, whichever way the command or a config gave them
+        self.path = Path(os.path.abspath(path)) if path is not None else None
         self.line = line
         self.key = key
         self.origin = origin  # the command-line option that gave the value (e.g. "--set k=v")

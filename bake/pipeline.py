@@ -78,6 +78,41 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 
+# the pipeline stage(s) that read a config key, by key prefix (first match): a sweep reports their
+# seconds, and a key set in a section whose stages do not run is said to change nothing
+STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
+                 ("mesh.triangulate.", ("triangulate",)), ("textures.lightmap.", ("textures", "lighting")),
+                 ("textures.", ("textures",)), ("lighting.", ("lighting",)), ("bsp.", ("bsp",)),
+                 ("bvh.", ("bvh",)), ("export.", ("export",)), ("transform.", ("transform",)),
+                 ("import.", ("import",)))
+
+
+def stages_for(key: str) -> tuple[str, ...]:
+    for prefix, stages in STAGES_OF_KEY:
+        if key.startswith(prefix):
+            return stages
+    return ()
+
+
+def unused_settings(cfg: Config, ran: Collection[str], idle: dict[str, str] | None = None) -> list[str]:
+    """One line per key the author set (in the config or with --set) in a section whose stage
+    does not run: it changes nothing, and the line names the switch that would run it, or, for a
+    stage that found nothing to do (``idle``: stage name -> why), why."""
+    switch = {spec.name: spec.switch for spec in STAGES}
+    unused: dict[str, list[str]] = {}
+    for key, where in cfg.given.items():
+        stages = stages_for(key)
+        if not stages or any(s in ran for s in stages) or switch.get(stages[0]) in (None, key) or "[" in key:
+            continue  # (a field of one [[lights]] entry: the list itself is named)
+        unused.setdefault(stages[0], []).append(key if where == "file" else f"{key} ({where})")
+    idle = idle or {}
+    return [f"{', '.join(keys)} {'is' if len(keys) == 1 else 'are'} set, but the {stage} stage "
+            + (f"has nothing to do ({idle[stage]})" if stage in idle else "does not run")
+            + f", so {'it changes' if len(keys) == 1 else 'they change'} nothing"
+            + ("" if stage in idle else f" (set {switch[stage]} = true)")
+            for stage, keys in unused.items()]
+
+
 # Stages that build on the positions as the export will write them (docs/formats.md, "Numbers").
 GRID_USERS = ("bsp", "export")
 
@@ -104,11 +139,12 @@ def plan(cfg: Config) -> list[tuple[StageSpec, bool, str]]:
     """Each stage with whether it runs and why (or why not)."""
     out = []
     for spec in STAGES:
-        on = spec.enabled(cfg)
+        value = spec.enabled(cfg)
+        on = bool(value)
         if spec.switch is None:
             reason = "always runs"
-        else:
-            reason = f"{spec.switch} = {'true' if on else 'false'}"
+        else:  # ("auto": the stage runs, and says it was skipped when the scene gives it nothing to do)
+            reason = f"{spec.switch} = {value if isinstance(value, str) else 'true' if on else 'false'}"
         out.append((spec, on, reason))
     return out
 
@@ -136,7 +172,8 @@ def finish_cache(result: BakeResult) -> None:
         result.cache_session = None
 
 
-# (stage name, event: "start" | "done" | "cached" | "step", and for "step" what the stage does now)
+# (stage name, event: "start" | "done" | "cached" | "skipped" (an idle stage) | "step", and for
+# "step" what the stage does now)
 Progress = Callable[..., None]
 
 
@@ -162,6 +199,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     cold: list[StageRecord] = []  # the records as computed (what entries store)
     skipped: list[dict[str, Any]] = []
     active: list[StageSpec] = []
+    check_sections(cfg)
     for spec, on, reason in plan(cfg):
         if not on:
             skipped.append({"name": spec.name, "ran": False, "reason": reason})
@@ -198,7 +236,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
                 advice.after_stage(rec.name, cfg, scene, shown, records)
                 records.append(shown)
                 if progress:
-                    progress(rec.name, "cached")
+                    progress(rec.name, "skipped" if rec.idle else "cached")
             info["from_cache"] = [r.name for r in hit.records]
             info["load_seconds"] = hit.seconds
             if observe is not None:
@@ -256,7 +294,13 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         if observe is not None:
             observe(spec.name, scene)
         if progress:
-            progress(spec.name, "done")
+            progress(spec.name, "skipped" if rec.idle else "done")
+    records, idle = _idle_to_skipped(records, skipped)
+    if until is None and records:
+        # settings of a stage that did not run: said with the first stage, a problem under --strict
+        for line in unused_settings(cfg, {r.name for r in records}, idle):
+            records[0].warn(line)
+            records[0].problems.append(line)
     later = None
     if session is not None:
         if session.deferred():  # a new output folder: written once the outputs are (output.finish)
@@ -270,6 +314,31 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
                       memo=memo)
 
 
+def _idle_to_skipped(records: list[StageRecord], skipped: list[dict[str, Any]]
+                     ) -> tuple[list[StageRecord], dict[str, str]]:
+    """A stage that found nothing to do in this scene (``StageRecord.idle``: the textures stage
+    under ``textures.enabled = "auto"`` on a model without textures) is reported as skipped, with
+    its reason; a warning it carries (the cache's) moves to the next stage that ran. Returns the
+    records of the stages that ran and the idle ones' reasons by name."""
+    kept: list[StageRecord] = []
+    idle: dict[str, str] = {}
+    carried: list[str] = []
+    for rec in records:
+        if rec.idle:
+            skipped.append({"name": rec.name, "ran": False, "reason": rec.idle})
+            idle[rec.name] = rec.idle
+            carried.extend(rec.warnings)
+            continue
+        for w in carried:
+            rec.warn(w)
+        carried = []
+        kept.append(rec)
+    if carried and kept:
+        for w in carried:
+            kept[-1].warn(w)
+    return kept, idle
+
+
 def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:
     """A record loaded from the cache, as this bake reports it: the time this bake spent on it
     (loading the entry, or nothing for the stages before the loaded one) and, in
@@ -278,6 +347,24 @@ def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:
     out.details["cache"] = {"from_cache": True, "computed_seconds": round(float(rec.seconds), 6)}
     out.seconds = seconds
     return out
+
+
+def check_sections(cfg: Config) -> None:
+    """The range checks the stages hold for their sections, run before the bake whether the stage
+    runs or not (a bad value under a switch that is off would otherwise wait, unsaid, for the day
+    the switch is turned on)."""
+    for target, section in SECTION_CHECKS:
+        mod_name, fn = target.split(":")  # (loaded by name, as the stages are)
+        try:
+            getattr(importlib.import_module(mod_name), fn)(section(cfg))
+        except ConfigError as e:
+            raise _in_config_file(e, cfg) from None
+
+
+# the stages' own range checks of their sections ("module:function", the section), see check_sections
+SECTION_CHECKS = (("bake.lighting.plan:check_config", lambda c: c.lighting),
+                  ("bake.textures.stage:check_config", lambda c: c.textures),
+                  ("bake.bvh.stage:check_config", lambda c: c.bvh))
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:

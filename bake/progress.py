@@ -84,7 +84,7 @@ class _Lines:
                     self._thread.start()
             elif event == "step" and stage == self._stage:
                 self._step = detail
-            elif event in ("done", "cached") and stage == self._stage:
+            elif event in ("done", "cached", "skipped") and stage == self._stage:
                 self._stage = ""
 
     def _run(self) -> None:
@@ -116,7 +116,8 @@ class _Lines:
 
 class StageProgress:
     """The ``progress`` callback of :func:`bake.pipeline.run`: ``(stage, "start" | "done" |
-    "cached")`` and ``(stage, "step", text)`` for a step within a stage."""
+    "cached" | "skipped")`` and ``(stage, "step", text)`` for a step within a stage ("skipped": the
+    stage found nothing to do, so the bar counts one stage fewer)."""
 
     def __init__(self, quiet: bool = False, total: int | None = None, *, after: float | None = None,
                  console: Any = None, every: float | None = None, stream: Any = None):
@@ -166,6 +167,8 @@ class StageProgress:
             elif event in ("done", "cached"):
                 self._done += 1
                 self._current = f"{stage} (cached)" if event == "cached" else stage
+            elif event == "skipped" and self.total:
+                self.total -= 1
             self._update_locked()
 
     def _show(self) -> None:

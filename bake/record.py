@@ -17,6 +17,11 @@ class StageRecord:
     ``details`` holds anything else worth keeping in report.json (JSON-serialisable).
     ``problems`` are warnings (also in ``warnings``) that make the bake a failure under
     ``--strict`` / ``report.strict`` (exit status 4), e.g. a lit bake whose colours are all black.
+    ``failures`` are the problems where a part of the stage failed on valid input (an external
+    tool crashed or timed out) and the bake went on without it: under ``--strict`` they make the
+    exit status 5 (a stage failed) instead of 4. :meth:`fail` records one.
+    ``idle`` is set by a stage that found nothing to do in this scene (``textures.enabled = "auto"``
+    on a model without textures): why; the pipeline reports the stage as skipped with that reason.
     """
 
     name: str
@@ -28,9 +33,18 @@ class StageRecord:
     effects: list[dict[str, Any]] = field(default_factory=list)
     details: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+    idle: str = ""
 
     def warn(self, message: str) -> None:
         self.warnings.append(message)
+
+    def fail(self, message: str) -> None:
+        """A part of the stage failed on valid input and the bake goes on without it: a warning,
+        a problem, and under --strict exit status 5."""
+        self.warnings.append(message)
+        self.problems.append(message)
+        self.failures.append(message)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -43,6 +57,7 @@ class StageRecord:
             "effects": list(self.effects),
             "details": self.details,
             "problems": list(self.problems),
+            "failures": list(self.failures),
         }
 
 

@@ -37,6 +37,8 @@ class Material:
     # Encoded image bytes (PNG/JPEG) for textures embedded in the model (GLB, data: URIs).
     texture_data: bytes | None = field(default=None, repr=False)
     double_sided: bool = False
+    # where ``texture_data`` came from, for messages and the report ("Box.glb images[0], image/png")
+    texture_source: str | None = None
 
     def with_(self, **kw: Any) -> "Material":
         return dataclasses.replace(self, **kw)

@@ -52,14 +52,9 @@ from . import config as config_mod
 from .export.write import write_atomic
 from .config import Config
 from .errors import ConfigError
+from .pipeline import stages_for
 from .scene import Scene
 
-# the pipeline stage(s) whose seconds a key's sweep reports, by key prefix (first match)
-STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
-                 ("mesh.triangulate.", ("triangulate",)), ("textures.lightmap.", ("textures", "lighting")),
-                 ("textures.", ("textures",)), ("lighting.", ("lighting",)), ("bsp.", ("bsp",)),
-                 ("bvh.", ("bvh",)), ("export.", ("export",)), ("transform.", ("transform",)),
-                 ("import.", ("import",)))
 # the figure plotted as "error" per stage: (row key, label); others use the image error
 ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
                   "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
@@ -71,13 +66,6 @@ IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1
 PREVIEW_SIZE = (160, 120)
 
 
-def stages_for(key: str) -> tuple[str, ...]:
-    for prefix, stages in STAGES_OF_KEY:
-        if key.startswith(prefix):
-            return stages
-    return ()
-
-
 def error_of(key: str) -> tuple[str, str]:
     st = stages_for(key)
     if key.startswith("textures.lightmap."):
@@ -85,8 +73,9 @@ def error_of(key: str) -> tuple[str, str]:
     return ERROR_OF_STAGE.get(st[0], IMAGE_ERROR) if st else IMAGE_ERROR
 
 
-def parse_vary(text: str) -> tuple[str, list[float]]:
-    """``"section.key=1,2,4"`` -> ``("section.key", [1, 2, 4])`` (numbers as ints when whole)."""
+def parse_vary(text: str, option: str = "--vary") -> tuple[str, list[float]]:
+    """``"section.key=1,2,4"`` -> ``("section.key", [1, 2, 4])`` (numbers as ints when whole);
+    errors name ``option``, the command-line option the values came from."""
     if "=" not in text:
         raise ConfigError(f"--vary expects section.key=v1,v2,..., got {text!r}")
     key, vals = text.split("=", 1)
@@ -102,12 +91,12 @@ def parse_vary(text: str) -> tuple[str, list[float]]:
         try:
             f = float(v)
         except ValueError:
-            raise ConfigError(f"--vary value {v!r} is not a number", key=key) from None
+            raise ConfigError(f"{option} value {v!r} is not a number", key=key) from None
         if not math.isfinite(f):
-            raise ConfigError(f"--vary value {v!r} is not finite", key=key)
+            raise ConfigError(f"{option} value {v!r} is not finite", key=key)
         out.append(int(f) if f.is_integer() and "." not in v and "e" not in v.lower() else f)
     if not out:
-        raise ConfigError("--vary needs at least one value", key=key)
+        raise ConfigError(f"{option} needs at least one value", key=key)
     return key, out
 
 

@@ -173,6 +173,7 @@ def watch(target: Path, overrides: list[str], out: Path, *, quiet: bool = False,
         old_term = signal.signal(signal.SIGTERM, _term)
     files: set[str] = {os.path.abspath(target)}
     shown: set[str] = set()
+    first = True
     try:
         while True:
             t0 = time.perf_counter()
@@ -186,11 +187,14 @@ def watch(target: Path, overrides: list[str], out: Path, *, quiet: bool = False,
                 if debug:
                     traceback.print_exc(file=stderr)
                 print(f"{_stamp()} bake: error: {e}", file=stderr, flush=True)
+                if first and e.unwatchable:  # no edit of the watched files can make it bake
+                    return e.exit_code
             except (MemoryError, RecursionError, Exception) as e:  # a bug: say so, keep watching
                 if debug:
                     traceback.print_exc(file=stderr)
                 print(f"{_stamp()} bake: internal error: {type(e).__name__}: {e} (rerun with --debug for the "
                       "traceback)", file=stderr, flush=True)
+            first = False
             watcher.update(files)
             if not quiet and files != shown:
                 print(f"{_stamp()} watching {len(files)} file(s); Ctrl-C to stop", file=stderr, flush=True)

@@ -289,6 +289,15 @@ def row_for(scene, out, rec, seconds: float, lib_s: float, model: str, ratio, or
     }
 
 
+def speed_targets(text: str) -> list[tuple[str, int | float]]:
+    """``bunny:2000,bunny:0.1`` -> [("bunny", 2000), ("bunny", 0.1)] (a point makes a ratio)."""
+    out: list[tuple[str, int | float]] = []
+    for item in filter(None, text.split(",")):
+        model, _, target = item.partition(":")
+        out.append((model, float(target) if "." in target else int(target)))
+    return out
+
+
 def before_row(before: Before, path: Path, overrides, cfg: dict, repeat: int = 1) -> dict:
     res, arr = before.run(path, overrides, cfg, repeat)
     Va = arr["Va"]
@@ -313,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed-passes", action="store_true",
                     help="the speed rows also without the peak round, without the refine and peak rounds and "
                          "without any optional pass (speed_passes rows)")
+    ap.add_argument("--speed-targets", default="bunny:2000,suzanne:300,ico4:300",
+                    help="the speed rows: MODEL:TARGET, a count, or a ratio when it has a point (bunny:0.1)")
     ap.add_argument("--passes", action="store_true", help="the refine and peak rounds on and off (passes rows)")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simplify.json"))
     ap.add_argument("--derive", metavar="FILE", help="only recompute the derived figures of a results file")
@@ -353,18 +364,19 @@ def main(argv: list[str] | None = None) -> int:
         variants = [("default", {})]
         if args.speed_passes:
             variants += [(name, cfg) for name, cfg in PASSES.items() if cfg] + list(FLOOR.items())
-        for model, target in (("bunny", 2000), ("suzanne", 300), ("ico4", 300)):
+        for model, target in speed_targets(args.speed_targets):
             path, _ = variant(model, "given", tmp)
             scene = load(path, None)
+            ask = {"target_ratio": target} if isinstance(target, float) else {"target_triangles": target}
             runs: dict = {name: [] for name, _ in variants}
             old = []
             for _ in range(3):  # the old stage's runs between the new one's: the same load for both
                 for name, cfg in variants:
-                    runs[name].append(run_stage(scene, target_triangles=target, **cfg))
+                    runs[name].append(run_stage(scene, **ask, **cfg))
                 if before is not None:
-                    old.append(before.run(path, None, {"target_triangles": target}, repeat=1)[0])
+                    old.append(before.run(path, None, ask, repeat=1)[0])
             out, rec, best = min(runs["default"], key=lambda r: r[2])
-            lib = library_seconds(scene, target)
+            lib = library_seconds(scene, int(rec.details.get("target_triangles", target)))
             entry = {"model": model, "triangles_in": int(scene.n_triangles), "target": target,
                      "triangles_out": int(out.n_triangles), "stage_seconds_best_of_3": round(best, 3),
                      "library_seconds_best_of_3": round(lib, 5), "stage_over_library": round(best / lib, 1),

@@ -36,12 +36,13 @@ def test_a_texture_that_is_not_used_is_said_with_how_to_use_it(tmp_path, capsys)
                                     "vt 0 1\nusemtl wood\nf 1/1 2/2 3/3 4/4\n")
     (tmp_path / "m.mtl").write_text("newmtl wood\nKd 1 1 1\nmap_Kd wood.png\n")
     Image.fromarray(np.full((4, 4, 3), (120, 80, 40), np.uint8)).save(tmp_path / "wood.png")
-    rep, out = bake(capsys, tmp_path / "m.obj", tmp_path / "o")
+    rep, out = bake(capsys, tmp_path / "m.obj", tmp_path / "o", "textures.enabled=false")
     w = " ".join(warnings_of(rep, "import"))
     assert "texture ('wood') that is not used" in w and "textures.enabled = true" in w and "white" in w, w
     assert "textures.enabled = true" in out  # on the terminal too
-    rep, _ = bake(capsys, tmp_path / "m.obj", tmp_path / "o2", "textures.enabled=true")
-    assert not [x for x in warnings_of(rep, "import") if "not used" in x]
+    for on in ("textures.enabled=true", "textures.enabled=auto"):  # (auto: the default)
+        rep, _ = bake(capsys, tmp_path / "m.obj", tmp_path / "o2", on)
+        assert not [x for x in warnings_of(rep, "import") if "not used" in x]
 
 
 def test_bsp_splits_past_the_simplify_budget_are_said(tmp_path, capsys):

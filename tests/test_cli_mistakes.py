@@ -107,6 +107,8 @@ def test_a_bake_without_lists_json_still_writes_its_report(tmp_path, off):
 @pytest.mark.parametrize("extra, why", [
     (["--set", "lighting.enabled=true", "--set", 'lighting.lights=[{kind="sun"}]'], "'tri colors' goes per triangle"),
     (["--set", "bvh.enabled=true"], "the BVH's triangle numbers"),
+    (["--set", "export.uvs=yes"], "'tri uvs' goes per triangle"),
+    (["--set", "export.lightmap_uvs=yes"], "'lightmap uvs' goes per triangle"),
 ])
 @pytest.mark.parametrize("faces", ["quads", "ngons"])
 def test_whole_faces_fall_back_to_triangles_beside_per_triangle_lists(tmp_path, extra, why, faces):
@@ -120,6 +122,8 @@ def test_whole_faces_fall_back_to_triangles_beside_per_triangle_lists(tmp_path, 
     assert "quads" not in lists and "ngons" not in lists
     if "tri colors" in why:  # one colour per written triangle
         assert len(lists["tri colors"]) == 8
+    elif "uvs" in why:  # u1, v1, u2, v2, u3, v3 per written triangle
+        assert len(lists[why.split("'")[1]]) == 6 * 8
     else:  # the BVH numbers the triangles of the list
         assert sorted(int(i) for i in lists["bvh tri ids"] if int(i) > 0) == list(range(1, 9))
 
@@ -137,6 +141,12 @@ def test_report_on_a_folder_without_its_lists_exits_3_and_keeps_the_page(baked):
     lists.write_text(json.dumps(doc))
     r = bake_subprocess(["report", out])
     assert "missing: 'mat colors', 'tris'" in one_error_line(r, 3, lists)
+    assert (out / "report.html").read_bytes() == page
+    # a lists.json that holds no "lists" object at all (an edited or foreign file)
+    del doc["lists"]
+    lists.write_text(json.dumps(doc))
+    r = bake_subprocess(["report", out])
+    assert "does not hold the lists report.json says the bake wrote" in one_error_line(r, 3, lists)
     assert (out / "report.html").read_bytes() == page
 
 

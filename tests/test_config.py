@@ -16,7 +16,9 @@ def test_defaults_run_only_the_always_on_stages():
     from bake.pipeline import plan
     cfg = config.load()
     ran = [spec.name for spec, on, _ in plan(cfg) if on]
-    assert ran == ["import", "transform", "triangulate", "clean", "export"]
+    # textures: "auto", planned, and skipped when the model names no texture (tests/test_new_user_round2.py)
+    assert ran == ["import", "transform", "triangulate", "clean", "textures", "export"]
+    assert [why for spec, on, why in plan(cfg) if spec.name == "textures"] == ["textures.enabled = auto"]
 
 
 def test_unknown_key_names_file_line_and_suggestion(tmp_path):

@@ -188,9 +188,14 @@ def test_non_utf8_warning_names_the_file(tmp_path):
     ("export.sb3_name=report.html", "export.sb3_name", "a name the bake writes itself"),
     ("export.sb3_name=Report.MD", "export.sb3_name", "a name the bake writes itself"),
     ("export.into_name=lists", "export.into_name", "a name the bake writes itself"),
-    ("export.json_name=m.sb3", "export.json_name", "would name both the lists' JSON"),
-    ("export.json_name=M.sprite3", "export.json_name", "would name both the lists' JSON"),
-    ("export.sb3_name=lists.json", "export.sb3_name", "would name both the lists' JSON"),
+    # (issue 37: a project under another name was written and left out of the summary; the names
+    # that used to collide with the others' now end in their own suffixes)
+    ("export.json_name=m.sb3", "export.json_name", "must be a visible file name ending in .json"),
+    ("export.json_name=M.sprite3", "export.json_name", "must be a visible file name ending in .json"),
+    ("export.sb3_name=lists.json", "export.sb3_name", "must be a visible file name ending in .sb3"),
+    ("export.sb3_name=x.txt", "export.sb3_name", "must be a visible file name ending in .sb3"),
+    ("export.sb3_name=.hidden.sb3", "export.sb3_name", "must be a visible file name ending in .sb3"),
+    ("export.into_name=merged.txt", "export.into_name", "must be a visible file name ending in .sb3"),
 ])
 def test_output_names_are_checked_before_the_bake(layout, setting, key, what):
     """A user's review: export.json_name was never checked (a path failed after the bake with

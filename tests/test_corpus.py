@@ -67,7 +67,10 @@ def test_corpus_entry(entry, tmp_path, capsys):
         assert tri["counts_out"]["triangles"] == sum(n - 2 for n in sizes)
     # ... minus what cleaning reports dropping
     dropped = clean["counts_in"]["triangles"] - clean["counts_out"]["triangles"]
-    assert dropped >= 0
+    # every triangle clean dropped has its reason counted, and the warning gives both
+    reasons = clean["details"]["dropped_repeated_index"] + clean["details"]["dropped_zero_area"]
+    assert dropped == reasons
+    assert (dropped == 0) == (not any(w.startswith("dropped ") for w in clean["warnings"]))
     assert rep["scene"]["triangles"] == tri["counts_out"]["triangles"] - dropped
     lists = rep["lists"]
     assert lists["tris"]["items"] == 4 * rep["scene"]["triangles"]

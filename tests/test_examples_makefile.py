@@ -145,9 +145,14 @@ def test_makefile_with_relative_paths_rebakes_on_every_kind_of_dependency(projec
         '[input]\npath = "lit.obj"\n[export]\nprecision = 3\n'))
     assert json.loads((cwd / "out/lit/report.json").read_text())["config"]["export"]["precision"] == 3
     rebakes_only(cwd, "lit", lambda: os.utime(cwd / "models/lit.obj"))
-    # the missing texture arrives (with the folder it is in): the model is rebaked and now uses it
+    # the missing texture is named by its own path, not its folder: a new model beside it bakes
+    # alone (the folder's time changes; ghost does not rebake), and the texture's arrival (with the
+    # folder it is in) rebakes ghost, which now uses it
     dep = (cwd / "out/ghost.d").read_text()
-    assert "ghost.png" not in dep and f"  {(cwd / 'models').resolve()}" in dep  # the folder is watched
+    assert f"$(wildcard {(cwd / 'models/textures/ghost.png').resolve()})" in dep
+    assert not any(line.strip(" \\:") == str((cwd / "models").resolve()) for line in dep.splitlines())
+    rebakes_only(cwd, "newcomer", lambda: (cwd / "models/newcomer.obj").write_text(
+        CUBE.format(name="none").replace("mtllib none.mtl\n", "")))
     rebakes_only(cwd, "ghost", lambda: png(cwd / "models/textures/ghost.png", 30))
     assert "textures/ghost.png" in (cwd / "out/ghost.d").read_text()
     rebakes_only(cwd, "ghost", lambda: png(cwd / "models/textures/ghost.png", 60))

@@ -26,3 +26,24 @@ def test_license_is_an_spdx_string_and_the_build_backend_reads_it():
     req = [r for r in data["build-system"]["requires"] if r.startswith("setuptools")]
     m = re.fullmatch(r"setuptools>=(\d+)(\.\d+)*", req[0].replace(" ", "")) if req else None
     assert m and int(m.group(1)) >= 77, req
+
+
+def test_runtime_dependencies_are_what_bake_imports():
+    """trimesh and pygltflib were runtime dependencies that only the tests import (issue 37): they
+    belong to the test extras, and no module of bake/ imports them."""
+    import ast
+
+    data = tomllib.loads(PYPROJECT.read_text())
+    runtime = {d.split(">")[0].split("=")[0].split("<")[0].split(";")[0].strip().lower()
+               for d in data["project"]["dependencies"]}
+    dev = " ".join(data["project"]["optional-dependencies"]["dev"])
+    assert not {"trimesh", "pygltflib"} & runtime
+    assert "trimesh" in dev and "pygltflib" in dev
+    imported = set()
+    for path in (PYPROJECT.parent / "bake").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            if isinstance(node, ast.Import):
+                imported |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                imported.add(node.module.split(".")[0])
+    assert not {"trimesh", "pygltflib"} & imported

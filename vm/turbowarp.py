@@ -113,9 +113,9 @@ class Result:
     def done(self) -> bool:
         return bool(self.runs) and all(r["done"] and r["running"] == 0 for r in self.runs)
 
-    def blank(self, background=(255, 255, 255)) -> bool:
-        """Nothing but the background on the stage (or no image)."""
-        return self.image is None or not np.any(np.any(self.image != np.asarray(background, np.uint8), axis=2))
+    def blank(self) -> bool:
+        """Nothing but one colour on the stage, the backdrop's (or no image)."""
+        return self.image is None or not np.any(np.any(self.image != self.image[0, 0], axis=2))
 
     def problems(self) -> list[str]:
         """What a person would call broken: errors, a script still running, a blank stage."""

@@ -23,7 +23,7 @@ from .traverse import BARY_HI, BARY_LO
 
 
 
-def _check(cfg: BVHConfig) -> None:
+def check_config(cfg: BVHConfig) -> None:
     def need(ok: bool, key: str, msg: str) -> None:
         if not ok:
             raise ConfigError(msg, key=f"bvh.{key}")
@@ -38,6 +38,19 @@ def _check(cfg: BVHConfig) -> None:
 
 def list_names(prefix: str) -> dict[str, str]:
     return {"nodes": f"{prefix} nodes", "tris": f"{prefix} tris", "ids": f"{prefix} tri ids"}
+
+
+def _smaller(cfg: BVHConfig) -> str:
+    """What would make the BVH lists smaller, from the settings this bake used (advice that is
+    already taken is not given: the layout that is already quantised, a precision that is low)."""
+    ways = []
+    if cfg.layout != "quantised":
+        ways.append("bvh.layout = \"quantised\" (its child boxes are small integers)")
+    if cfg.precision == 0 or cfg.precision > 3:
+        ways.append(f"a lower bvh.precision (now {cfg.precision}{', exact' if cfg.precision == 0 else ''}; 3 rounds "
+                    "the coordinates to a thousandth of the diagonal)")
+    ways.append("fewer triangles (mesh.simplify)")
+    return "try " + ", or ".join(ways)
 
 
 def prepare(scene: Scene, precision: int) -> tuple[np.ndarray, np.ndarray, int | None, float]:
@@ -63,7 +76,7 @@ def prepare(scene: Scene, precision: int) -> tuple[np.ndarray, np.ndarray, int |
 
 
 def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
-    _check(cfg)
+    check_config(cfg)
     taken = sorted(set(list_names(cfg.list_prefix).values()) & set(scene.lists))
     if taken:  # (the BSP stage's lists, say): one would silently replace the other
         raise ConfigError(f"list name '{taken[0]}' is already written by an earlier stage "
@@ -135,6 +148,6 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
                      "(it loads, but blocks cannot add to it; TurboWarp has no limit)")
     if sz["bytes"] > PROJECT_JSON_LIMIT:
         rec.warn(f"the BVH lists alone take {sz['bytes']:,} bytes of project.json, more than the "
-                 "5 MiB scratch.mit.edu accepts; try layout = \"quantised\" or a lower precision")
+                 f"5 MiB scratch.mit.edu accepts; {_smaller(cfg)}")
     rec.seconds = time.perf_counter() - t0
     return scene, rec

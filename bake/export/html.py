@@ -196,6 +196,11 @@ def _limits_section(report: dict) -> str:
             f"<th></th></tr>{''.join(rows)}</table>")
 
 
+def _backdrop_words(rgb) -> str:
+    h = "#{:02x}{:02x}{:02x}".format(*rgb)
+    return "white" if h == "#ffffff" else f"{h}: the model's colours are too light to show on white"
+
+
 def _views_section(views: list, mesh) -> str:
     parts = [f"<h2>Previews</h2><p class=sub>Rendered from the written lists (rounded positions, encoded "
              f"colours: {_esc(mesh.colour_source)}) by scratch-bake's numpy rasterizer. Left: the painter's "
@@ -203,7 +208,9 @@ def _views_section(views: list, mesh) -> str:
              f"a depth-buffer render (the exact answer); right: where the painter shows another triangle in "
              f"a visibly different colour — <b class=bad>red</b>: wrong order; <b style='color:#e67e22'>"
              f"orange</b>: within a pixel of a triangle's edge; <b style='color:#b89600'>yellow</b>: the two "
-             f"faces are coplanar to the bake (either order is right).</p>"]
+             f"faces are coplanar to the bake (either order is right). The green flag's view is the "
+             f"project's stage: colours flat, as the reader sprite fills them, on its backdrop "
+             f"({_backdrop_words(mesh.backdrop)}).</p>"]
     for v in views:
         s = v.stats
         cls = "good" if s["wrong_pixels"] == 0 else "bad"

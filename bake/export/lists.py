@@ -148,8 +148,11 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
              "set export.vertex_colors = \"yes\" for an engine that shades per vertex"
              if has_vc else "the scene has no per-vertex colours"),
         pick(n.uvs, "export.uvs", cfg.uvs, has_uv, has_uv and tex,
-             "no texture goes into the project (textures.enabled = false or no encodings), so nothing "
-             "would sample the UVs; set textures.enabled = true to bake the texture, or export.uvs = \"yes\""
+             ("no texture goes into the project (textures.encodings writes none), so nothing would sample the "
+              "UVs; add \"list\", \"textimage\" or \"costume\" to textures.encodings, or set export.uvs = \"yes\""
+              if "textures" in scene.artefacts else
+              "no texture goes into the project (textures.enabled = false), so nothing would sample the UVs; set "
+              "textures.enabled = true to bake the texture, or export.uvs = \"yes\"")
              if has_uv else "the scene has no textured triangles with UVs"),
         pick(n.lightmap_uvs, "export.lightmap_uvs", cfg.lightmap_uvs, has_lm, has_lm, "the scene has no lightmap"),
         pick(n.two_sided, "export.two_sided", cfg.two_sided, two, two or "bsp" in scene.artefacts,

@@ -11,6 +11,7 @@ an interrupted bake leaves every file old or the whole folder new.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Any, Iterable
@@ -122,19 +123,26 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
 
 def depfile_for(result: BakeResult, out_dir: Path) -> str:
     """Make rules: ``OUT/report.json`` (named as ``--out`` was given, so it matches the Makefile's
-    own target name) depends on every file the bake read, and on the folder of every file the
-    model names that was not found (adding the file there changes the folder's time, so make
-    rebakes)."""
+    own target name) depends on every file the bake read, and on every file the model names that
+    was not found, once it is there (``$(wildcard ...)``: while it is missing nothing rebakes;
+    adding it does). A missing path whose name make cannot quote inside a function (white space,
+    parentheses, commas) is watched through the nearest folder on its way instead, whose time
+    changes when the file is added."""
     src = result.scene.source
     deps = [p.resolve() for p in src.files_read]
     if result.config.source:
         deps.append(Path(result.config.source).resolve())
+    missing = []
     for p in getattr(src, "files_missing", ()):
-        deps.extend(_watch_folders(Path(p)))
+        p = Path(os.path.abspath(p))
+        if re.search(r"[\s(),:%*?\[\]]", str(p)):
+            deps.extend(_watch_folders(p))
+        else:
+            missing.append(p)
     # report.json alone: every bake rewrites it. Naming the list files too would make them targets
     # with no recipe that look out of date after every input edit (they are rewritten only when
     # their bytes change), so every rule consuming them would rerun.
-    return depfile_text([out_dir / "report.json"], sorted(set(deps)))
+    return depfile_text([out_dir / "report.json"], sorted(set(deps)), sorted(set(missing)))
 
 
 def _watch_folders(missing: Path) -> list[Path]:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..render import Camera, Image, headlight, render
+from ..scratch import backdrop
 from ..scratch.colors import decode_numbers
 
 #: two pixels differ visibly when a channel differs by more than this (0..255)
@@ -51,6 +52,8 @@ class Mesh:
     bsp_planes: list | None = None
     colour_source: str = "material colours"
     notes: list[str] = field(default_factory=list)
+    # the .sb3's stage backdrop (bake.scratch.backdrop): what the green flag's view is drawn on
+    backdrop: tuple[int, int, int] = (255, 255, 255)
 
     @property
     def flat_tris(self) -> list:
@@ -91,7 +94,8 @@ def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
         two[i] = bool(m.get("double_sided"))
     mesh = Mesh(verts=verts, tris=t[:, :3] - 1, material=np.clip(t[:, 3] - 1, 0, len(mat_rgb) - 1),
                 mat_rgb=mat_rgb, two_sided=two,
-                vertex_output=cfg.get("lighting", {}).get("vertex_output", "color"))
+                vertex_output=cfg.get("lighting", {}).get("vertex_output", "color"),
+                backdrop=backdrop.from_report(report))
     cname, vcname = names.get("triangle_colors", "tri colors"), names.get("vertex_colors", "vert colors")
     if cname in lists and len(lists[cname]) == len(t):
         mesh.tri_rgb = _rgb(lists[cname])
@@ -320,7 +324,8 @@ def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light:
     else:
         pim = Image(image=None, tri_id=geo["painter"], depth=None, edge=None)
         zim = Image(image=None, tri_id=geo["zbuffer"], depth=None, edge=None)
-    pimg, zimg = shade(mesh, cam, pim, light=light), shade(mesh, cam, zim, light=light)
+    bg = (1.0, 1.0, 1.0) if light else tuple(c / 255.0 for c in mesh.backdrop)  # the stage's own: its backdrop
+    pimg, zimg = shade(mesh, cam, pim, bg, light=light), shade(mesh, cam, zim, bg, light=light)
     diff, stats = _difference(geo["painter"], geo["zbuffer"], geo["tie"], geo["edge"], pimg, zimg)
     stats.update({"order": geo["order"], "drawn": geo["drawn"], "colours": mesh.colour_source})
     return View(name, cam, pimg, zimg, diff, stats), pim

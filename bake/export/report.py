@@ -86,13 +86,14 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "scene": counts(scene),
         "materials": [{"name": m.name, "color": [round(float(c), 6) for c in m.color],
                        "double_sided": bool(m.double_sided),
-                       "texture": str(m.texture) if m.texture is not None else None}
+                       "texture": str(m.texture) if m.texture is not None else m.texture_source}
                       for m in scene.materials],
         "stages": [r.to_json() for r in result.records],
         "lists": lists,
         "limits": limits,
         "effects": effects,
-        "problems": [{"stage": r.name, "message": m} for r in result.records for m in r.problems],
+        "problems": [{"stage": r.name, "message": m, **({"failed": True} if m in r.failures else {})}
+                     for r in result.records for m in r.problems],
         "outputs": dict(sorted((outputs or {}).items())),
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
@@ -231,14 +232,39 @@ def _packed_markdown(report: dict[str, Any]) -> list[str]:
     return out
 
 
-def summary_lines(report: dict[str, Any]) -> list[str]:
-    """A short human summary (gltfpack-style) for the terminal."""
+# counts in the one-line summary whose name alone does not say what they count (left out there when 0)
+SUMMARY_MEANING = {
+    "folds": "pairs of neighbouring triangles facing each other",
+    "flipped_triangles": "triangles facing against the surface they stand for",
+    "new_nonmanifold_edges": "edges of three or more triangles the input did not have",
+    "new_misoriented_edges": "edges whose two triangles wind the same way",
+}
+
+
+def _summary_figure(key: str, v: Any) -> str:
+    """A figure for the one-line summary: with its unit, a count as a whole number, what a count
+    means where its name does not say."""
+    unit = fmt_unit(key, v, short=True)
+    if unit is not None:
+        return unit
+    text = f"{v:,}" if isinstance(v, int) or float(v).is_integer() and abs(v) >= 1 else f"{v:.3g}"
+    return f"{text} ({SUMMARY_MEANING[key]})" if key in SUMMARY_MEANING else text
+
+
+def summary_lines(report: dict[str, Any], command_seconds: float | None = None) -> list[str]:
+    """A short human summary (gltfpack-style) for the terminal; ``command_seconds``: the whole
+    command's wall time so far (start-up, imports, writing the outputs and reports), shown beside
+    the pipeline's."""
     s = report["scene"]
+    took = f"{report['seconds']:.2f} s"
+    if command_seconds is not None:
+        took += f" ({command_seconds:.2f} s for the whole command: start-up, stages, writing the outputs and reports)"
     lines = [f"{Path(report['input']['path'] or '').name}: {s['triangles']} triangles, {s['vertices']} vertices, "
-             f"{s['materials']} materials in {report['seconds']:.2f} s"]
+             f"{s['materials']} materials in {took}"]
     for st in report["stages"]:
-        nums = {k: v for k, v in st["accuracy"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        acc = " ".join(f"{k}={fmt_unit(k, v, short=True) or f'{v:.3g}'}" for k, v in nums.items())
+        nums = {k: v for k, v in st["accuracy"].items() if isinstance(v, (int, float)) and not isinstance(v, bool)
+                and not (k in SUMMARY_MEANING and v == 0)}  # (a count of defects that is 0 says nothing)
+        acc = " ".join(f"{k}={_summary_figure(k, v)}" for k, v in nums.items())
         if any(k.startswith("hausdorff") for k in nums):
             acc += " (Hausdorff distances in % of the bounding-box diagonal)"
         note = cache_note(st)
@@ -259,5 +285,9 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
                      + "; ".join(f"{p['stage']}: {p['message']}" for p in report["problems"]))
     pj = [lim for lim in report["limits"] if lim["name"].startswith("project.json")]
     if pj:
-        lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])})")
+        ex = _export_details(report)
+        into, own = ex.get("into") or {}, ex.get("sb3_project_json_bytes")
+        merged = f" in {into['file']} (the bake merged into {Path(into['project']).name})" if into.get("file") else ""
+        lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])}){merged}"
+                     + (f"; the bake's own .sb3: {_fmt_bytes(own)}" if merged and own is not None else ""))
     return lines

@@ -346,10 +346,13 @@ def make_escape(p: str | Path) -> str:
     return str(p).replace("\\", "\\\\").replace(" ", "\\ ").replace("#", "\\#").replace("$", "$$")
 
 
-def depfile_text(targets: list[Path], deps: list[Path]) -> str:
-    """Make-style dependency rule: every target depends on every input read."""
+def depfile_text(targets: list[Path], deps: list[Path], missing: list[Path] = ()) -> str:
+    """Make-style dependency rule: every target depends on every input read, and on each file in
+    ``missing`` (named by the model, not there) once it exists: ``$(wildcard PATH)`` is empty
+    while the file is missing, so nothing rebakes, and names it once it is there, newer than the
+    target, so the bake runs again."""
     t = " ".join(make_escape(p) for p in targets)
-    d = " \\\n  ".join(make_escape(p) for p in deps)
+    d = [make_escape(p) for p in deps] + [f"$(wildcard {make_escape(p)})" for p in missing]
     # empty rules for each dependency so a deleted input does not break make
     phony = "".join(f"\n{make_escape(p)}:\n" for p in deps)
-    return f"{t}: \\\n  {d}\n{phony}"
+    return f"{t}: \\\n  " + " \\\n  ".join(d) + f"\n{phony}"

@@ -16,16 +16,16 @@ def detect_format(job: ImportJob) -> str:
     fmt = FORMATS.get(job.path.suffix.lower())
     if fmt is None:
         raise InputError(f"unknown model format '{job.path.suffix}' (expected .obj, .gltf or .glb; "
-                         f"or set input.format)", path=job.path)
+                         f"or set input.format)", path=job.path, unwatchable=True)
     return fmt
 
 
 def stage(_: Scene, job: ImportJob) -> tuple[Scene, StageRecord]:
     """The import stage: read ``job.path`` into a new scene."""
     if not job.path.exists():
-        raise InputError("file not found", path=job.path)
+        raise InputError("file not found", path=job.path, unwatchable=True)
     if job.path.is_dir():
-        raise InputError("is a folder, expected a model file", path=job.path)
+        raise InputError("is a folder, expected a model file", path=job.path, unwatchable=True)
     fmt = detect_format(job)
     if fmt == "obj":
         from .obj import load

@@ -323,7 +323,7 @@ def build_material(doc: GltfDocument, i: int, rec: StageRecord, names: set[str])
     mode = m.get("alphaMode", "OPAQUE")
     if mode not in ("OPAQUE", "MASK", "BLEND"):
         raise doc.error(f"alphaMode {mode!r} is not OPAQUE, MASK or BLEND", w)
-    texture = data = None
+    texture = data = source = None
     tex = pbr.get("baseColorTexture")
     if tex:
         t = doc.array("textures")[tex["index"]]
@@ -337,6 +337,11 @@ def build_material(doc: GltfDocument, i: int, rec: StageRecord, names: set[str])
                 rec.warn(f"{w}: image file {ref.path} not found; texture ignored")
             else:
                 texture, data = ref.path, ref.data
+                if data is not None:  # embedded (a GLB buffer view or a data: URI)
+                    source = f"{doc.path.name} images[{src}]" + (f", {ref.mime}" if ref.mime else "")
+        wrap = _wrap_modes(doc, t)
+        if wrap:  # said by load() if this material's UVs leave [0, 1]
+            rec.details.setdefault("texture_wrap", {})[i] = f"{w}: textures[{tex['index']}] samples with {wrap}"
     if mode == "OPAQUE":
         color[3] = 1.0
     elif mode == "MASK" and texture is None and data is None:
@@ -350,7 +355,21 @@ def build_material(doc: GltfDocument, i: int, rec: StageRecord, names: set[str])
     if not isinstance(ds, bool):
         raise doc.error("doubleSided must be true or false", w)
     return Material(name=name, color=(color[0], color[1], color[2], color[3]), texture=texture,
-                    texture_data=data, double_sided=ds)
+                    texture_data=data, double_sided=ds, texture_source=source)
+
+
+_WRAP = {33071: "CLAMP_TO_EDGE", 33648: "MIRRORED_REPEAT", 10497: "REPEAT"}
+
+
+def _wrap_modes(doc: GltfDocument, t: dict) -> str:
+    """The texture's sampler's wrap modes other than REPEAT (glTF's default, and how bake samples
+    every texture), as text; empty when it repeats both ways."""
+    si = t.get("sampler")
+    smps = doc.array("samplers")
+    if not isinstance(si, int) or not 0 <= si < len(smps) or not isinstance(smps[si], dict):
+        return ""
+    other = sorted({_WRAP.get(smps[si].get(k, 10497), str(smps[si].get(k))) for k in ("wrapS", "wrapT")} - {"REPEAT"})
+    return f"{' / '.join(other)} (samplers[{si}])" if other else ""
 
 
 # --------------------------------------------------------------------------- lights
@@ -535,6 +554,12 @@ def load(job: ImportJob) -> tuple[Scene, StageRecord]:
         poly_uvs = uv[tris.reshape(-1)]
     if not len(tris):
         rec.warn("the scene has no triangles" + (" (no scenes or nodes)" if not roots else ""))
+    for gi, said in rec.details.pop("texture_wrap", {}).items():
+        # a texture that clamps or mirrors: it matters where its UVs leave [0, 1]
+        mine = np.repeat(gl_mats == gi, 3)
+        if poly_uvs is not None and mine.any() and ((poly_uvs[mine] < 0) | (poly_uvs[mine] > 1)).any():
+            rec.warn(f"{said}, but bake repeats every texture; its UVs leave [0, 1], so those triangles read "
+                     "other texels than the file shows")
 
     source = SourceInfo(path=job.path, files_read=tuple(doc.files_read), format=doc.format,
                         files_missing=tuple(doc.files_missing))

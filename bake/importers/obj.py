@@ -29,15 +29,17 @@ Rules (what this importer decides, so the report and tests can rely on it):
   others have one get white (warning). 5 or more than 7 values: position only (warning).
   Fewer than 3: :class:`InputError`.
 * ``vt u [v [w]]``: ``v`` defaults to 0, ``w`` is ignored; OBJ convention kept (v up).
-  ``vn`` lines are counted, not parsed (normals are recomputed downstream).
-* Positions, colours and texture coordinates must be finite: NaN/Inf (including MSVC's
+  ``vn x y z`` lines are checked as strictly (numbers, three of them, finite) and then dropped:
+  normals are recomputed downstream.
+* Positions, colours, texture coordinates and normals must be finite: NaN/Inf (including MSVC's
   ``1.#IND``/``1.#INF``) is an :class:`InputError` naming the first few lines, as is a position
   beyond ``scene.MAX_COORDINATE`` (1e30). A malformed
-  number on a ``v``/``vt``/``f`` line is an :class:`InputError` naming file and line.
+  number on a ``v``/``vt``/``vn``/``f`` line is an :class:`InputError` naming file and line.
 * Faces: index 0, an index out of range (positive indices may refer to vertices defined later
   in the file; negative ones count back from the line) or fewer than 3 corners make a bad face:
   :class:`InputError` when ``job.strict``, else the face is dropped with one warning giving the
-  count and the first lines. ``vn`` indices are checked for syntax only (normals are unused).
+  count and the first lines. Normal indices (``v//vn``, ``v/vt/vn``) are checked the same way
+  against the ``vn`` lines, though the normals themselves are unused.
 * ``poly_uvs`` is per corner when any kept corner has a ``vt``; corners without one get (0, 0)
   and a warning. No ``vt`` on any kept corner: ``None``.
 * ``usemtl``: faces use the last ``usemtl`` above them; faces before any ``usemtl`` (or after an
@@ -211,8 +213,9 @@ class _Lines:
         self.n = 0
         self.first: list[int] = []
 
-    def add(self, lines) -> None:
-        self.n += len(lines)
+    def add(self, lines, n: int | None = None) -> None:
+        """``lines`` (the first few, at least), of ``n`` in all (default: as many as given)."""
+        self.n += len(lines) if n is None else n
         room = _FIRST_LINES + 1 - len(self.first)  # one more than shown: "..." or not
         if room > 0:
             self.first.extend(int(x) for x in lines[:room])
@@ -495,7 +498,7 @@ def _gather(arr: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> bytes:
 # Errors, in the order the checks run over the whole file: the first kind found anywhere wins,
 # and within a kind the first line (or, for NaN / range, all lines counted).
 (_E_V_NUMBER, _E_V_FEW, _E_V_NONFINITE, _E_V_HUGE, _E_VT_NUMBER, _E_VT_EMPTY, _E_VT_NONFINITE,
- _E_CORNER, _E_CORNER_PARSE) = range(1, 10)
+ _E_VN_NUMBER, _E_VN_FEW, _E_VN_NONFINITE, _E_CORNER, _E_CORNER_PARSE) = range(1, 13)
 _NO_ERROR = 100
 
 
@@ -524,6 +527,8 @@ class _Parser:
         self.best = _NO_ERROR  # the first error kind found so far
         self.errors: dict[int, tuple[str, int]] = {}
         self.nonfinite_v, self.huge_v, self.nonfinite_vt = _Lines(), _Lines(), _Lines()
+        self.nonfinite_vn = _Lines()
+        self.bad_normals = _Lines()  # face lines naming a normal that is not there (a warning)
         # for warnings
         self.odd_v, self.odd_v_values = _Lines(), 0
         self.many_vt = _Lines()
@@ -545,6 +550,7 @@ class _Parser:
         self.sizes: list[np.ndarray] = []
         self.vres: list[np.ndarray] = []  # 0-based vertex index; -1: index 0 / before the file
         self.tres: list[np.ndarray | None] = []  # the same for vt; -2: no vt; None: none at all
+        self.nres: list[np.ndarray | None] = []  # the same for vn (checked, then not used)
         self.fmat: list[np.ndarray] = []  # material id per face
         self.fline: list[np.ndarray | None] = []  # line numbers, kept for blocks with bad faces
         self.fstart: list[int] = []  # first face of each block
@@ -574,20 +580,22 @@ class _Parser:
             return  # nothing in a later block comes first (a NUL byte is the reader's)
         t = self.t = _Tokens(block, nlb, final, self.phys)
         self.phys += t.n_phys
-        vlines, vtlines = t.lines_of(_V), t.lines_of(_VT)
-        nv0, nt0 = self.nv, self.nt
+        vlines, vtlines, vnlines = t.lines_of(_V), t.lines_of(_VT), t.lines_of(_VN)
+        nv0, nt0, nn0 = self.nv, self.nt, self.nvn
         self.nv += len(vlines)
         self.nt += len(vtlines)
-        self.nvn += int(np.count_nonzero(t.line_kind == _VN))
+        self.nvn += len(vnlines)
         self.vertices(vlines, nv0)
         if self.best > _E_VT_NUMBER:
             self.texcoords(vtlines)
+        if self.best > _E_VN_NUMBER:
+            self.normals(vnlines)
         faces = self.corners() if self.best > _E_CORNER else None
         if self.best == _NO_ERROR:
             uses = self.other_lines()
-            self.faces(faces, vlines, nv0, vtlines, nt0, uses)
+            self.faces(faces, vlines, nv0, vtlines, nt0, uses, vnlines, nn0)
         else:  # an error will be raised: the arrays are not needed
-            for lst in (self.pos, self.uv, self.sizes, self.vres, self.tres, self.fmat, self.fline,
+            for lst in (self.pos, self.uv, self.sizes, self.vres, self.tres, self.nres, self.fmat, self.fline,
                         self.col_blocks):
                 lst.clear()
         self.t = None
@@ -720,6 +728,25 @@ class _Parser:
         if self.best == _NO_ERROR:
             self.uv.append(np.ascontiguousarray(rows, dtype=np.float64))
 
+    def normals(self, lines: np.ndarray) -> None:
+        """``vn x y z`` lines are checked like ``vt`` lines (bake recomputes normals and keeps
+        none of them): a malformed number, fewer than three values or a NaN is an error."""
+        got = self._floats(_VN, "vn", lines, _E_VN_NUMBER)
+        if got is None:
+            return
+        vals, counts = got
+        ln = self.t.line_no
+        few = counts < 3
+        if few.any():
+            i = int(np.argmax(few))
+            self._fail(_E_VN_FEW, f"vertex normal needs x y z, got {int(counts[i])} value(s)", int(ln[lines[i]]))
+            return
+        if self.best < _E_VN_NONFINITE:
+            return
+        bad = ~np.isfinite(self._rows(vals, counts, 3)).all(axis=1)
+        if bad.any():
+            self._count(_E_VN_NONFINITE, self.nonfinite_vn, ln[lines[bad]])
+
     # ------------------------------------------------------------------ faces
     def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Face lines, corners per face, corner index fields (C, 3) int64 and presence (C, 3);
@@ -788,7 +815,7 @@ class _Parser:
         return flines, sizes, idx, has
 
     def faces(self, faces, vlines: np.ndarray, nv0: int, vtlines: np.ndarray, nt0: int,
-              uses: list[tuple[int, str]]) -> None:
+              uses: list[tuple[int, str]], vnlines: np.ndarray, nn0: int) -> None:
         """Resolve this block's corners against the ``v``/``vt`` lines so far (relative indices
         and indices 0 are final here; an index beyond the file's last vertex is known only at
         the end) and give each face its material."""
@@ -822,13 +849,23 @@ class _Parser:
             tres[tbad] = -1
             tres[~tp] = -2
             bad |= tbad
+        nres = None
+        if has[:, 2].any():  # normal indices: checked, but a bad one only warns (normals are unused)
+            nbefore = (nn0 + np.searchsorted(vnlines, flines))[face_of]
+            nraw, np_ = idx[:, 2], has[:, 2]
+            nres = np.where(nraw > 0, nraw - 1, nbefore + nraw)
+            nres[np_ & ((nraw == 0) | (nres < 0))] = -1
+            nres[~np_] = -2
+            self.bad_normals.add(self.t.line_no[flines[np.unique(face_of[nres == -1])]])
+            nres = np.where(nres == -1, -2, nres)  # (counted; beyond the file's vn lines: at the end)
         badf = sizes < 3
         if bad.any():
             badf[face_of[bad]] = True
         del face_of, bad
         # faces that may point past the file's last vertex / vt (known at the end)
         ahead = ((len(vres) and int(vres.max()) >= self.nv)
-                 or (tres is not None and len(tres) and int(tres.max()) >= self.nt))
+                 or (tres is not None and len(tres) and int(tres.max()) >= self.nt)
+                 or (nres is not None and len(nres) and int(nres.max()) >= self.nvn))
         anybad = bool(badf.any())
         self.fline.append(self.t.line_no[flines] if anybad or ahead else None)
         if anybad and self.first_bad is None:
@@ -840,6 +877,7 @@ class _Parser:
         self.sizes.append(sizes)
         self.vres.append(vres)
         self.tres.append(tres)
+        self.nres.append(nres)
         self.fmat.append(fmat)
 
     def resolve(self, raw: np.ndarray, present: np.ndarray, before: np.ndarray, total: int
@@ -901,7 +939,8 @@ class _Parser:
         if kind == _NO_ERROR:
             return
         acc = {_E_V_NONFINITE: (self.nonfinite_v, "vertex values"),
-               _E_VT_NONFINITE: (self.nonfinite_vt, "texture coordinates")}
+               _E_VT_NONFINITE: (self.nonfinite_vt, "texture coordinates"),
+               _E_VN_NONFINITE: (self.nonfinite_vn, "vertex normals")}
         if kind in acc:
             lines, what = acc[kind]
             raise self.err(f"{what} are NaN or infinite on {lines.n} line(s): {lines.text()}",
@@ -970,12 +1009,25 @@ class _Parser:
             tres = np.concatenate([np.full(len(v), -2, np.int64) if x is None else x
                                    for v, x in zip(self.vres, self.tres)])
         self.tres.clear()
+        nres = None
+        if any(x is not None for x in self.nres):
+            nres = np.concatenate([np.full(len(v), -2, np.int64) if x is None else x
+                                   for v, x in zip(self.vres, self.nres)])
+        self.nres.clear()
         vres = _concat(self.vres, (0,), np.int64)
         badc = vres < 0
         badc |= vres >= NV
         if tres is not None:
             badc |= tres == -1
             badc |= tres >= NT
+        if nres is not None and (nres >= self.nvn).any():  # normals named past the file's last vn
+            faces_of = np.searchsorted(np.cumsum(sizes), np.flatnonzero(nres >= self.nvn), side="right")
+            self.bad_normals.add(np.array([self._face_line(int(f)) for f in np.unique(faces_of)[:_FIRST_LINES + 1]]),
+                                 n=len(np.unique(faces_of)))
+        if self.bad_normals.n:
+            rec.warn(f"{self.bad_normals.n} face(s) name a normal (v//vn, v/vt/vn) that is 0 or beyond the file's "
+                     f"{self.nvn} 'vn' line(s) (lines {self.bad_normals.text()}); normals are not used (bake "
+                     "computes its own), so the faces are kept")
         badf = sizes < 3
         cend = None
         if badc.any():

@@ -124,9 +124,16 @@ class Baker:
         return lev
 
     def current_scene(self) -> Scene:
+        """The scene with the triangles as they are now (split by subdivision). The textures
+        stage's per-triangle ``face_albedo`` belongs to the triangles before any split: dropped
+        here when they were split (the albedo artefact computes it for the new ones) and put back
+        for the new triangles by :meth:`traced`."""
+        fa = self.scene.face_albedo
+        if fa is not None and len(fa) != len(self.tris):
+            fa = None
         return self.scene.replace(positions=self.pos, triangles=self.tris, tri_material=self.tri_material,
                                   tri_uvs=self.tri_uvs, tri_polygon=self.tri_polygon,
-                                  vertex_colors=self.vcol, face_colors=None)
+                                  vertex_colors=self.vcol, face_colors=None, face_albedo=fa)
 
     def albedo(self) -> np.ndarray:
         return colmod.triangle_albedo(self.current_scene(), self.albedo_fn)
@@ -361,7 +368,10 @@ class Baker:
             vertex={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.V.val.items()},
             face={k: (v[:, 0] if v.shape[1] == 1 else v) for k, v in self.F.val.items()},
             vertex_se=dict(self.V.se), face_se=dict(self.F.se), albedo=alb.copy())
-        return {"scene": self.current_scene(), "ef": self.ef, "ev": self.ev, "albedo": alb, "used": self.used(),
+        scene = self.current_scene()
+        if self.scene.face_albedo is not None and scene.face_albedo is None:  # (split triangles: theirs)
+            scene = scene.replace(face_albedo=alb.copy())
+        return {"scene": scene, "ef": self.ef, "ev": self.ev, "albedo": alb, "used": self.used(),
                 "area": self.area, "tris": self.tris, "n_vertices": len(self.pos), "result": res}
 
 

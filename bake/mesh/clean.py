@@ -222,6 +222,16 @@ def stage(scene: Scene, cfg: CleanConfig) -> tuple[Scene, StageRecord]:
         "min_area": float(cfg.area_tolerance) * scale * scale if cfg.drop_degenerate else None,
         "scale": scale,
     })
+    dropped = counts["dropped_repeated_index"] + counts["dropped_zero_area"]
+    if dropped:
+        why = []
+        if counts["dropped_repeated_index"]:
+            why.append(f"{counts['dropped_repeated_index']:,} with a repeated corner (two of its corners are one "
+                       "vertex, as written or after welding)")
+        if counts["dropped_zero_area"]:
+            why.append(f"{counts['dropped_zero_area']:,} with no area (under mesh.clean.area_tolerance x the "
+                       "diagonal squared: collinear or tiny)")
+        rec.warn(f"dropped {dropped:,} of {T0:,} triangles: " + "; ".join(why))
     if counts["polygons_split"]:
         rec.warn(f"{counts['polygons_split']} polygon(s) lost a degenerate triangle; their other "
                  "triangles are no longer marked as whole polygons (tri_polygon = -1)")

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from . import sb3
+from . import backdrop, sb3
 from . import readers
 from . import textimage
 from .check import check_packed_lists
@@ -37,9 +37,15 @@ def look_at(pos, target, *, focal: float = 300.0, near: float = 0.01) -> readers
                           pitch=round(pitch, 2), focal=focal, near=near)
 
 
+# auto_camera: the share of the stage's half-width and half-height the model may take
+FRAME_FILL = 0.9
+
+
 def auto_camera(verts: list[float] | np.ndarray) -> readers.Camera:
-    """A camera in front of, above and left of the model, looking at its centre, far enough for
-    the whole model to fit the 480x360 stage with the default focal length."""
+    """A camera in front of, above and left of the model, looking at its centre, as close as lets
+    every vertex fall inside FRAME_FILL of the 480x360 stage with the default focal length (the
+    reader's projection ``focal * x / z``): the model fills the green flag's view as it fills the
+    report's other previews (at a fixed 0.95 diagonals away a long model sat small in the middle)."""
     v = np.asarray(verts, np.float64).reshape(-1, 3)
     if len(v) == 0:
         return readers.Camera()
@@ -48,7 +54,20 @@ def auto_camera(verts: list[float] | np.ndarray) -> readers.Camera:
     diag = float(np.linalg.norm(hi - lo)) or 1.0
     f = np.array([0.45, -0.4, 1.0])
     f /= np.linalg.norm(f)
-    pos = [float(f"{x:.4g}") for x in c - f * 0.95 * diag]
+    probe = look_at(c - f * diag, c)
+    # the reader's frame for that yaw and pitch (x right, y up, z into the screen)
+    yaw, pitch = math.radians(probe.yaw), math.radians(probe.pitch)
+    fwd = np.array([math.sin(yaw) * math.cos(pitch), math.sin(pitch), math.cos(yaw) * math.cos(pitch)])
+    right = np.cross([0.0, 1.0, 0.0], fwd)
+    right /= np.linalg.norm(right)
+    up = np.cross(fwd, right)
+    rel = v - c
+    x, y, z = rel @ right, rel @ up, rel @ fwd
+    half_w, half_h = FRAME_FILL * 240.0, FRAME_FILL * 180.0
+    # each vertex is inside when the camera stands at least this far back from the centre
+    dist = float(np.max(np.maximum(probe.focal * np.abs(x) / half_w, probe.focal * np.abs(y) / half_h) - z))
+    dist = max(dist, float(np.max(-z)) + 0.05 * diag, 0.05 * diag)  # (and in front of every vertex)
+    pos = [float(f"{x:.4g}") for x in c - fwd * dist]
     return look_at(pos, c, near=float(f"{diag * 1e-3:.4g}"))
 
 
@@ -194,6 +213,14 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         else:
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
         stage = sb3.Target("Stage", is_stage=True, lists=stored)
+        if spec is not None and spec.mesh is not None:  # the reader draws the mesh: a backdrop it shows on
+            m = spec.mesh
+            bd = backdrop.choose(values[m.verts], values[m.tris], values.get(m.tri_colors) if m.tri_colors else None,
+                                 values.get(m.mat_colors) if m.mat_colors else None)
+            stage.costumes = [sb3.Costume("backdrop1", sb3.Asset(bd.svg(), "svg"), 1, (240.0, 180.0))]
+            details["backdrop"] = bd.to_json()
+            if bd.rgb != backdrop.WHITE and record is not None:
+                record.effects.append({"name": "dark backdrop", "ran": True, "reason": bd.reason})
         if not bool(_cfg(cfg, "turbowarp_fencing", True)):
             stage.comments[sb3.TW_CONFIG_COMMENT_ID] = sb3.turbowarp_settings_comment(
                 {"runtimeOptions": {"fencing": False}})
@@ -203,6 +230,7 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         data, pj_bytes = sb3.write_sb3(targets)
         files[sb3_name] = data
         details["project_json_bytes"] = pj_bytes
+        details["sb3_project_json_bytes"] = pj_bytes  # (project_json_bytes is the merged one with export.into)
         details["sb3_assets"] = sb3.archive_sizes(data)["assets"]
     if cfg.sprite3:
         if spec is not None:

@@ -17,6 +17,7 @@ half-transparent cut-out texture gives the colour of its opaque part at half alp
 from __future__ import annotations
 
 import io
+import re
 import math
 import warnings
 from pathlib import Path
@@ -117,7 +118,9 @@ def load_rgba(source: Source, *, name: str | Path | None = None) -> np.ndarray:
         raise InputError("image file not found", path=where) from None
     except (OSError, SyntaxError, ValueError, Image.DecompressionBombError,
             Image.DecompressionBombWarning) as e:
-        raise InputError(f"cannot read image: {e}", path=where) from None
+        # (Pillow names a byte source by its in-memory object: "<_io.BytesIO object at 0x...>")
+        why = re.sub(r"<_io\.BytesIO object at 0x[0-9a-fA-F]+>", "the embedded bytes", str(e))
+        raise InputError(f"cannot read image: {why}", path=where) from None
 
 
 # --------------------------------------------------------------------------------------------

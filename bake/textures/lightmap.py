@@ -64,7 +64,7 @@ from ..scene import Scene
 WORKER = Path(__file__).with_name("xatlas_worker.py")
 # How the worker is started (tests replace it to check crash and timeout handling).
 WORKER_COMMAND: list[str] = [sys.executable, str(WORKER)]
-CACHE_FORMAT = "scratch-bake xatlas cache 1"
+CACHE_FORMAT = "scratch-bake xatlas cache 2"  # 2: the atlas after the runs that fit the resolution
 CACHE_SUBDIR = Path(".bake-cache") / "xatlas"  # the default cache, inside the output folder
 
 # xatlas's tolerances are absolute (XA_EPSILON = 1e-4 on lengths, FLT_EPSILON on areas, a
@@ -295,20 +295,89 @@ def unwrap(scene: Scene, cfg: LightmapConfig, *, cache_dir: Path | None | str = 
     p32, idx, used, scale = _mesh_for_xatlas(scene)
     options = xatlas_options(cfg, scale)
     version = xatlas_version()
+    cdir = cache_directory(cfg) if cache_dir == "config" else (Path(cache_dir) if cache_dir else None)
+    key = _cache_key(p32, idx, options, version)
+    cpath = None if cdir is None else cdir / key[:2] / f"{key}.npz"
+    data = _cache_load(cpath)  # the atlas these options came to, after every run it took
+    if data is not None:
+        return _atlas_from(data, scene, used, key, True, version, scale)
+    want = int(cfg.resolution)
+    best = None
+    retried = ""
+    tried: list[tuple[int, int]] = []  # (resolution asked, atlas side)
+    for _ in range(_FIT_RUNS):
+        data = _run_worker(p32, idx, options, cfg.timeout)
+        retried = retried or str(data.get("retried_after", ""))
+        side = max(int(data["width"]), int(data["height"]))
+        asked = int(options["pack"]["resolution"])
+        tried.append((asked, side))
+        # the largest atlas that fits, else the smallest one
+        rank = (side <= want, side if side <= want else -side)
+        if best is None or rank > best[1]:
+            best = (data, rank)
+        # xatlas sizes the charts for the resolution asked, then grows the atlas where they and
+        # their padding do not fit (25-60%; padding around many small charts is a floor): ask for
+        # less, where a line through the tries says the atlas fits; once one fits, ask between it
+        # and the least that did not, until the atlas is within _FIT_CLOSE of the side wanted
+        if cfg.texels_per_unit > 0 or (side <= want and side >= _FIT_CLOSE * want) or asked <= _FIT_LEAST:
+            break
+        nxt = _next_resolution(tried, want)
+        if nxt is None:
+            break
+        options = json.loads(json.dumps(options))
+        options["pack"]["resolution"] = nxt
+    data = best[0]
+    if retried:
+        data["retried_after"] = np.str_(retried)  # (a crash in any of the runs is named)
+    _cache_store(cpath, data)
+    return _atlas_from(data, scene, used, key, False, version, scale)
+
+
+# unwrap: runs of xatlas with a smaller resolution asked, until the atlas fits the one wanted; how
+# far below the size that should fit the next one asks, and the least resolution asked
+_FIT_RUNS = 5
+_FIT_MARGIN = 0.97
+_FIT_LEAST = 8
+_FIT_CLOSE = 0.95
+
+
+def _next_resolution(tried: list[tuple[int, int]], want: int) -> int | None:
+    """The resolution to ask xatlas for next so its atlas fits ``want`` as closely as it can
+    (``tried``: (asked, atlas side) so far). Before any fits: proportional after one try, then
+    along the line through the last two (the atlas grows by a floor of padding plus a share of
+    what is asked). Once one fits: along the line between the largest that fit and the least
+    asked that did not, strictly between them. None when there is nothing new to ask."""
+    fits = [t for t in tried if t[1] <= want]
+    over = [t for t in tried if t[1] > want]
+    if fits:
+        a0, s0 = max(fits)
+        above = [t for t in over if t[0] > a0]
+        if not above:
+            return None  # (nothing above the fit was asked: it was the side wanted, or more)
+        a1, s1 = min(above)
+        guess = a0 + (want - s0) * (a1 - a0) / max(s1 - s0, 1)
+        nxt = min(int(guess), a1 - 1)
+        return nxt if nxt > a0 and all(a != nxt for a, _ in tried) else None
+    (a1, s1) = tried[-1]
+    if len(tried) >= 2 and tried[-2][0] != a1 and tried[-2][1] != s1:
+        a0, s0 = tried[-2]
+        slope = (s1 - s0) / (a1 - a0)
+        guess = a1 + (want - s1) / slope if slope > 0 else a1 * want / s1
+    else:
+        guess = a1 * want / s1
+    nxt = max(_FIT_LEAST, int(guess * _FIT_MARGIN))
+    return None if nxt >= a1 or any(a == nxt for a, _ in tried) else nxt
+
+
+def _cache_key(p32: np.ndarray, idx: np.ndarray, options: dict, version: str) -> str:
+    """The cache key of an unwrap: exactly what xatlas is first handed (the format, its version,
+    the options, the positions and indices)."""
     h = hashlib.sha256()
     for part in (CACHE_FORMAT, version, json.dumps(options, sort_keys=True)):
         h.update(part.encode() + b"\0")
     h.update(np.ascontiguousarray(p32).tobytes())
     h.update(np.ascontiguousarray(idx).tobytes())
-    key = h.hexdigest()
-    cdir = cache_directory(cfg) if cache_dir == "config" else (Path(cache_dir) if cache_dir else None)
-    cpath = None if cdir is None else cdir / key[:2] / f"{key}.npz"
-    data = _cache_load(cpath)
-    cached = data is not None
-    if data is None:
-        data = _run_worker(p32, idx, options, cfg.timeout)
-        _cache_store(cpath, data)
-    return _atlas_from(data, scene, used, key, cached, version, scale)
+    return h.hexdigest()
 
 
 def _atlas_from(data: dict, scene: Scene, used: np.ndarray, key: str, cached: bool, version: str,

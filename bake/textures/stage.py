@@ -21,7 +21,8 @@ It runs after the mesh is final (triangulate, clean, simplify) and **before ligh
    ``Scene.tri_lightmap_uvs`` (exported as the ``lightmap uvs`` list) and
    ``scene.artefacts["lightmap"]`` (a ``lightmap.LightmapJob``: atlas + settings) for the lighting
    stage's ``target = "lightmap"`` (``bake.lighting.lightmap.bake_lightmap``); coverage figures in the record.
-   A crash, a timeout or a too-large mesh is a warning: the bake goes on without a lightmap.
+   A crash, a timeout or a too-large mesh is a failure: the bake goes on without a lightmap and
+   warns, and ``--strict`` exits 5 (a stage failed).
 """
 
 from __future__ import annotations
@@ -163,7 +164,8 @@ def _load_textures(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> tuple
         src = m.texture_data if m.texture_data is not None else m.texture
         where = str(m.texture) if m.texture is not None else "embedded"
         try:
-            img = images.load_rgba(src, name=m.texture if m.texture is not None else f"material '{m.name}' image")
+            img = images.load_rgba(src, name=m.texture if m.texture is not None else
+                                   m.texture_source or f"material '{m.name}' image")
         except InputError as e:
             rec.warn(f"material '{m.name}': texture not used ({e}); the material keeps its colour")
             continue
@@ -191,10 +193,24 @@ def _target_size(img: np.ndarray, cfg: TexturesConfig) -> tuple[int, int]:
 # the stage
 
 
+def idle_reason(scene: Scene, cfg: TexturesConfig) -> str:
+    """Why the stage has nothing to do under ``enabled = "auto"`` ("" when it has): no material
+    names a texture, no ``textures.texture`` is given and no lightmap atlas is asked for."""
+    if cfg.enabled != "auto" or cfg.texture or cfg.lightmap.enabled:
+        return ""
+    if any(m.texture is not None or m.texture_data is not None for m in scene.materials):
+        return ""
+    return "textures.enabled = auto: no material of the model names a texture"
+
+
 def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     rec = StageRecord(name="textures")
     check_config(cfg)
+    rec.idle = idle_reason(scene, cfg)
+    if rec.idle:
+        rec.seconds = time.perf_counter() - t0
+        return scene, rec
     T = scene.n_triangles
     scene, textures = _load_textures(scene, cfg, rec)
     used = set(np.unique(scene.tri_material).tolist()) if T else set()
@@ -304,9 +320,10 @@ def _atlas_warnings(atlas, cfg: TexturesConfig, rec: StageRecord) -> None:
     W, H = atlas.width, atlas.height
     key = "textures.lightmap.resolution"
     if lm.texels_per_unit <= 0 and max(W, H) > lm.resolution:
-        rec.warn(f"lightmap: xatlas made the atlas {W}x{H}, past {key} = {lm.resolution} (it grows the "
-                 "atlas when the charts and their padding do not fit); the lightmap lists and costume are "
-                 "that size")
+        rec.warn(f"lightmap: xatlas made the atlas {W}x{H}, past {key} = {lm.resolution} even when asked for "
+                 "less (the charts' padding does not fit in it); the lightmap lists and costume are that size. "
+                 "Fewer, larger charts (a higher textures.lightmap.max_cost) or less textures.lightmap.padding "
+                 "make it smaller")
     if not lm.lit or "list" not in cfg.encodings:
         return
     items = W * H
@@ -329,7 +346,7 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
     try:
         atlas = lightmap.unwrap(scene, lm)
     except StageError as e:
-        rec.warn(f"no lightmap: {e}")
+        rec.fail(f"no lightmap: {e}")
         rec.effects.append({"name": "lightmap", "ran": False, "reason": str(e),
                             "seconds": round(time.perf_counter() - t0, 6)})
         return scene

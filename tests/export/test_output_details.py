@@ -62,7 +62,7 @@ def test_an_emptied_assets_folder_is_removed_on_rebake(tmp_path, capsys):
     assert run(capsys, "run", model, "--out", out, "--quiet", "--set", "textures.enabled=true")[0] == 0
     assert [p.name for p in (out / "assets").iterdir()] == ["tex_wood.png"]
     (out / "lists" / "mine.txt").write_text("a user's file in a folder of ours")
-    assert run(capsys, "run", model, "--out", out, "--quiet")[0] == 0
+    assert run(capsys, "run", model, "--out", out, "--quiet", "--set", "textures.enabled=false")[0] == 0
     assert not (out / "assets").exists(), "an empty assets/ stayed behind"
     assert (out / "lists" / "mine.txt").read_text().startswith("a user's")  # a folder with a user's file stays
     assert (out / "notes.txt").read_text() == "mine"

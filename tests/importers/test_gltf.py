@@ -797,6 +797,32 @@ def test_texture_transform_and_texcoord_set(tmp_path):
     assert not rec.warnings
 
 
+@pytest.mark.parametrize("wrap,scale,said", [(None, 1.0, False), (33071, 1.0, False), (33071, 2.0, True),
+                                              (33648, 3.0, True), (10497, 3.0, False)])
+def test_a_clamping_sampler_is_said_where_the_uvs_leave_the_image(tmp_path, wrap, scale, said):
+    """bake samples every texture as repeating; a sampler that clamps or mirrors is said only
+    where the material's UVs leave [0, 1] (a transform's scale here), where it makes a difference."""
+    g = G()
+    pos = g.acc(_polygon(4))
+    uv = g.acc(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float))
+    g.j["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(PNG).decode()}]
+    g.j["textures"] = [{"source": 0} if wrap is None else {"source": 0, "sampler": 0}]
+    if wrap is not None:
+        g.j["samplers"] = [{"wrapS": wrap}]
+    tex = {"index": 0}
+    if scale != 1.0:
+        tex["extensions"] = {"KHR_texture_transform": {"scale": [scale, scale]}}
+        g.j["extensionsUsed"] = ["KHR_texture_transform"]
+    g.j["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": tex}}]
+    g.node(mesh=g.mesh({"attributes": {"POSITION": pos, "TEXCOORD_0": uv},
+                        "indices": g.acc([0, 1, 2, 0, 2, 3], 5123), "material": 0}))
+    _, rec = run(g.write(tmp_path / "w.gltf"))
+    warned = [w for w in rec.warnings if "samples with" in w]
+    assert bool(warned) == said, rec.warnings
+    if said:
+        assert "samplers[0]" in warned[0] and ("CLAMP_TO_EDGE" in warned[0] or "MIRRORED_REPEAT" in warned[0])
+
+
 # --------------------------------------------------------------------------- generated: lights
 def test_lights_punctual_world_space(tmp_path):
     g = G()

@@ -198,14 +198,14 @@ def test_continuation_at_end_of_file_and_bare_cr(tmp_path):
 def test_newline_kind_is_decided_for_the_whole_file(tmp_path):
     """No LF in the first 64 KiB but one later: the whole file uses LF (its CRs are spaces), as
     when it was read at once; without any LF, CR ends lines."""
-    cr_lines = "\r".join(["vn 0 1 0"] * 8000)
+    cr_lines = "\r".join(["s 1 2 3 4"] * 8000)
     assert len(cr_lines) > obj._HEAD_BYTES
     p = write(tmp_path, cr_lines + "\rv 1 2 3\n")
     ref = same_for_all_blocks(p, sizes=(64, 4096))
-    assert ref[1].n_vertices == 0 and dict(ref[3])["normals"] == 1  # one long 'vn' line
+    assert ref[1].n_vertices == 0 and dict(ref[3])["groups_objects_smoothing_lines"] == 1  # one long 's' line
     p = write(tmp_path, cr_lines + "\rv 1 2 3\r")
     ref = same_for_all_blocks(p, sizes=(64, 4096))
-    assert ref[1].n_vertices == 1 and dict(ref[3])["normals"] == 8000
+    assert ref[1].n_vertices == 1 and dict(ref[3])["groups_objects_smoothing_lines"] == 8000
 
 
 def test_relative_indices_count_vertices_in_earlier_blocks(tmp_path):

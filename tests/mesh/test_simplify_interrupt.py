@@ -29,7 +29,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, corpus_path
+from conftest import REPO, corpus_path, sigint_default
 
 CRASH = ("Fatal Python error", "Segmentation fault", "core dumped")
 
@@ -61,7 +61,7 @@ def test_sigint_during_a_threaded_query_exits_cleanly(tmp_path):
         "    sys.exit(130)\n")
     for delay in (0.3, 0.7, 1.1):
         p = subprocess.Popen([sys.executable, str(child)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             env=_env(), cwd=tmp_path)
+                             env=_env(), cwd=tmp_path, preexec_fn=sigint_default)
         assert p.stdout.readline().strip() == b"ready"
         time.sleep(delay)
         p.send_signal(signal.SIGINT)
@@ -83,7 +83,7 @@ class _Terminal:
     def __init__(self, argv: list[str], cwd: Path):
         master, slave = pty.openpty()
         self.p = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, env=_env(), cwd=cwd,
-                                  close_fds=True)
+                                  close_fds=True, preexec_fn=sigint_default)
         os.close(slave)
         self.fd = master
         self.text = ""

@@ -29,7 +29,7 @@ import pytest
 from bake import cli, config, pipeline
 from bake.export import preview
 from bake.scratch import blocks as B
-from bake.scratch import sb3
+from bake.scratch import backdrop, sb3
 from bake.scratch.project import auto_camera
 from conftest import CORPUS
 
@@ -54,16 +54,17 @@ def bake_to(model: Path, out: Path, sections: dict) -> Path:
 
 
 def _preview(sb3_path: Path):
-    project, _ = sb3.load_project(sb3_path)
+    project, assets = sb3.load_project(sb3_path)
     lists = {n: items for t in project["targets"] for n, items in (t.get("lists") or {}).values()}
     sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
     two = lists.get("mat two-sided") or [0] * len(lists.get("mat colors", []))
     report = {"config": {"export": {"names": {}}}, "materials": [{"double_sided": bool(x)} for x in two]}
     mesh = preview.mesh_from_lists(lists, report)
+    mesh.backdrop = backdrop.from_project(project, assets)  # what the stage shows where nothing is drawn
     cam = auto_camera(lists["verts"])
     variables = {n: v for n, v in sprite["variables"].values()}
     assert [variables["cam x"], variables["cam yaw"]] == [cam.x, cam.yaw]  # the green flag's camera
-    return preview.stage_view(mesh, cam)
+    return (*preview.stage_view(mesh, cam), mesh.backdrop)
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +82,10 @@ def played(tmp_path_factory):
     suzanne = CORPUS / "suzanne_obj" / "suzanne.obj"
     if suzanne.exists():  # no BSP tree, material colours: the list's order, culled on the stage
         projects.append(("suzanne", bake_to(suzanne, tmp / "suzanne", {})))
+    box = CORPUS / "box_textured_gltf_separate" / "BoxTextured.gltf"
+    if box.exists():  # textured by default; white and unlit with its texture off (a dark backdrop)
+        projects.append(("box", bake_to(box, tmp / "box", {})))
+        projects.append(("white box", bake_to(box, tmp / "white", {"textures": {"enabled": False}})))
     run = turbowarp.run(projects, modes=("compiled", "interpreted"), repeat=1)
     return {"run": run, "projects": dict(projects), "previews": {k: _preview(p) for k, p in projects}}
 
@@ -105,12 +110,25 @@ def test_turbowarp_applies_the_projects_settings_comment(played):
 
 def test_the_stage_agrees_with_the_green_flag_preview(played):
     for r in played["run"].results:
-        view, painter = played["previews"][r.id]
-        a = preview.stage_agreement(r.image, view, painter)
+        view, painter, bg = played["previews"][r.id]
+        a = preview.stage_agreement(r.image, view, painter, background=bg)
         assert a["interior_pixels"] > 100 and a["covered_inner_pixels"] > 5000, a
         assert a["within_1"] == 1.0, f"{r.id} {r.mode}: {a}"
         assert a["covered_within_1"] >= COVERED_WITHIN_1, f"{r.id} {r.mode}: {a}"
         assert a["interior_left_blank"] == 0 and a["empty_painted"] == 0, f"{r.id} {r.mode}: {a}"
+
+
+def test_an_unlit_white_model_shows_on_its_stage(played):
+    """White triangles, unlit: the stage's backdrop is dark, and TurboWarp's stage shows the box
+    (on the white stage it was blank: every pixel 255)."""
+    if "white box" not in played["projects"]:
+        pytest.skip("the corpus's BoxTextured.gltf is not there")
+    _, painter, bg = played["previews"]["white box"]
+    assert bg == backdrop.DARK
+    for mode in ("compiled", "interpreted"):
+        img = played["run"].get("white box", mode).image
+        far = np.abs(img.astype(int) - np.asarray(bg)).max(axis=2) > 100
+        assert far.mean() > 0.2 and far[painter.tri_id >= 0].mean() > 0.95, mode
 
 
 def test_compiled_and_interpreted_draw_the_same_picture(played):
@@ -124,9 +142,9 @@ def test_a_mirrored_or_shifted_stage_fails_the_agreement(played):
     """The check can fail: the teapot's spout is on the right; mirrored, it is not."""
     pid = "teapot" if "teapot" in played["projects"] else "demo"
     r = played["run"].get(pid, "compiled")
-    view, painter = played["previews"][pid]
+    view, painter, bg = played["previews"][pid]
     for bad in (np.ascontiguousarray(r.image[:, ::-1]), np.roll(r.image, 3, axis=1)):
-        a = preview.stage_agreement(bad, view, painter)
+        a = preview.stage_agreement(bad, view, painter, background=bg)
         assert a["covered_within_1"] < COVERED_WITHIN_1 or a["within_1"] < 1.0 or a["empty_painted"] > 0
 
 
@@ -168,7 +186,7 @@ def test_problems_are_reported(tmp_path):
 
 def test_an_unsafe_frame_draws_the_usable_triangles(played, tmp_path):
     """The green-flag frame made unsafe in TurboWarp: the camera's focal length 30 times the green
-    flag's and turned 16 degrees left, so that the model's picture reaches far beyond 4000 pixels
+    flag's and turned 24 degrees left, so that the model's picture reaches far beyond 4000 pixels
     to the right while its left silhouette crosses the stage. ``_safe`` is false, vertices beyond
     the pen's reach are marked through their screen x, and the stage, compiled and interpreted
     alike, agrees with the preview of exactly the triangles ``readers.drawn`` says the reader
@@ -179,10 +197,11 @@ def test_an_unsafe_frame_draws_the_usable_triangles(played, tmp_path):
     from bake.scratch import readers
 
     pid = "teapot" if "teapot" in played["projects"] else "demo"
-    project, _ = sb3.load_project(played["projects"][pid])
+    project, assets = sb3.load_project(played["projects"][pid])
+    bg = backdrop.from_project(project, assets)
     lists = {n: items for t in project["targets"] for n, items in (t.get("lists") or {}).values()}
     cam = auto_camera(lists["verts"])
-    cam = dataclasses.replace(cam, focal=cam.focal * 30, yaw=cam.yaw - 16)
+    cam = dataclasses.replace(cam, focal=cam.focal * 30, yaw=cam.yaw - 24)
     px, py, pz = readers.project(np.asarray(lists["verts"], np.float64).reshape(-1, 3), cam)
     ok = readers.usable(px, py, pz, cam.near, cam.focal)
     assert not readers.safe_frame(cam, readers.bounding_sphere(lists["verts"])) and (~ok).any() and ok.any()
@@ -212,13 +231,15 @@ def test_an_unsafe_frame_draws_the_usable_triangles(played, tmp_path):
     sub = dict(lists, tris=[int(x) for x in t.ravel()])
     report = {"config": {"export": {"names": {}}},
               "materials": [{"double_sided": bool(x)} for x in (two or [0] * len(lists.get("mat colors", [])))]}
-    view, painter = preview.stage_view(preview.mesh_from_lists(sub, report), cam)
+    mesh = preview.mesh_from_lists(sub, report)
+    mesh.backdrop = bg
+    view, painter = preview.stage_view(mesh, cam)
     assert 0.1 < (painter.tri_id < 0).mean() < 0.9  # both model and empty stage in view
     for r in run.results:
         assert r.problems() == [], f"{r.mode}: {r.problems()}"
         assert str(r.variables.get("_safe")).lower() in ("false", "0"), r.variables
         assert float(r.variables["cam yaw"]) == cam.yaw and float(r.variables["focal"]) == cam.focal
-        a = preview.stage_agreement(r.image, view, painter)
+        a = preview.stage_agreement(r.image, view, painter, background=bg)
         assert a["interior_pixels"] > 1000, a
         assert a["within_1"] == 1.0 and a["interior_left_blank"] == 0 and a["empty_painted"] == 0, f"{r.mode}: {a}"
     assert np.array_equal(run.get("unsafe", "compiled").image, run.get("unsafe", "interpreted").image)

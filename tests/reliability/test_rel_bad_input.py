@@ -52,6 +52,10 @@ OBJ_ERRORS = [
     ("vt_empty", TRI + "vt\nf 1 2 3\n", 4, "texture coordinate needs u"),
     ("vt_malformed", TRI + "vt 0 y\nf 1 2 3\n", 4, "malformed number 'y'"),
     ("vt_nan", TRI + "vt nan 0\nf 1/1 2/1 3/1\n", 4, "texture coordinates are NaN"),
+    # normals are checked as vt lines are (issue 37), though bake computes its own
+    ("vn_malformed", TRI + "vn a b c\nf 1 2 3\n", 4, "malformed number 'a' in a 'vn' line"),
+    ("vn_too_few", TRI + "vn 0 1\nf 1//1 2//1 3//1\n", 4, "vertex normal needs x y z, got 2"),
+    ("vn_nan", TRI + "vn 0 nan 1\nf 1//1 2//1 3//1\n", 4, "vertex normals are NaN"),
     ("f_empty", TRI + "f\n", 4, "fewer than 3"),
     ("f_two_corners", TRI + "f 1 2\n", 4, "fewer than 3"),
     ("f_malformed", TRI + "f 1 2 x\n", 4, "malformed face corner 'x'"),
@@ -80,7 +84,8 @@ def test_malformed_obj_line_names_file_and_line(tmp_path, capsys, name, text, li
 
 # directives that are legal or ignorable: they bake, and a warning names what was skipped
 OBJ_ODD = [
-    ("vn_not_parsed", TRI + "vn a b c\nf 1 2 3\n", None),  # normals are counted, not read (docstring)
+    # a face naming a normal that is not there (real files do: OpenSubdiv's catmark torus has no vn)
+    ("vn_index_missing", TRI + "vn 0 0 1\nf 1//1 2//1 3//2\n", r"1 face\(s\) name a normal .*\(lines 5\)"),
     ("usemtl_without_name", TRI + "usemtl\nf 1 2 3\n", None),
     ("mtllib_without_name", TRI + "mtllib\nf 1 2 3\n", r"\.obj:4: 'mtllib' without a file name"),
     ("mtllib_missing", "mtllib gone.mtl\n" + TRI + "f 1 2 3\n", r"not found: 'gone\.mtl' \(.*\.obj:1\)"),

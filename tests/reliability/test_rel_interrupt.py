@@ -22,6 +22,7 @@ import pytest
 
 from rel_util import write_obj
 from test_rel_nothing_lost import comparable_one as _comparable, grid, snapshot
+from conftest import sigint_default
 
 pytestmark = pytest.mark.slow
 
@@ -93,7 +94,7 @@ def interrupt(model: Path, work: Path, old: dict, when, sig=signal.SIGINT) -> tu
     returns once the moment has come). Returns (exit status, stderr)."""
     restore(work, old)
     proc = subprocess.Popen(bake_cmd(model, work / "out", work / "out.d", *NEW), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=sigint_default)
     if callable(when):
         when(proc)
     else:

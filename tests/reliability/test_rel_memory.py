@@ -96,7 +96,8 @@ def test_a_resolution_that_cannot_fit_under_a_memory_cap_is_refused_with_one_tha
     assert r2.returncode == 0, (fit, r2.stderr[-2000:])
     rep = json.loads((scene / "o2" / "report.json").read_text())
     lm = next(s for s in rep["stages"] if s["name"] == "lighting")["details"]["lightmap"]
-    assert lm["atlas_width"] >= fit * 0.9  # a real lightmap of about that size was baked
+    # a real lightmap of about that size was baked (its longer side: xatlas's atlas need not be square)
+    assert fit * 0.9 <= max(lm["atlas_width"], lm["atlas_height"]) <= fit
     tex = next(s for s in rep["stages"] if s["name"] == "textures")["details"]["lightmap"]
     assert tex["memory_estimate_bytes"] <= tex["memory_available_bytes"]
     # the refusal came before the work: far sooner than the bake that fits

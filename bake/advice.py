@@ -1,8 +1,8 @@
 """Warnings that need more than one stage's view of a bake, added to the stage records.
 
-The pipeline calls :func:`after_stage` after each stage. Each check reads the config, the scene
-and the records so far, and says in the stage's record what an author would otherwise find out
-the hard way:
+Each stage's entry in the registry (``bake.stages``, ``advice``) names its check here; the
+pipeline calls it after the stage ran. Each check reads the config, the scene and the records so
+far, and says in the stage's record what an author would otherwise find out the hard way:
 
 * **import**: textured materials while ``textures.enabled = false`` -- the model bakes in plain
   material colours (often white) and the textures are not written.
@@ -16,8 +16,6 @@ the hard way:
 
 from __future__ import annotations
 
-from typing import Any
-
 from .config import Config
 from .record import StageRecord
 from .scene import Scene
@@ -27,13 +25,7 @@ BSP_LARGE_INPUT = 20_000  # triangles: a painter's engine in Scratch draws a few
 SIMPLIFY_MISS = 0.02  # simplify above its target by more than this did not reach it
 
 
-def after_stage(name: str, cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
-    check = _CHECKS.get(name)
-    if check is not None:
-        check(cfg, scene, rec, records)
-
-
-def _import(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
+def unused_textures(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
     if cfg.textures.enabled:
         return
     textured = [m for m in scene.materials if m.texture is not None or m.texture_data is not None]
@@ -61,7 +53,7 @@ def _simplify_budget(cfg: Config, records: list[StageRecord]) -> tuple[int, str]
     return None
 
 
-def _bsp(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
+def bsp_size(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
     n_in = int(rec.counts_in.get("triangles", 0))
     n_out = int(rec.counts_out.get("triangles", scene.n_triangles))
     budget = _simplify_budget(cfg, records)
@@ -87,7 +79,7 @@ def _bsp(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]
                  "mesh.simplify.target_triangles = 3000)")
 
 
-def _lighting(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
+def unplaced_or_dark_lights(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
     effects = {e.get("name", ""): e for e in rec.effects}
     for i, lt in enumerate(cfg.lighting.lights):
         eff = next((e for n, e in effects.items() if n.startswith(f"light[{i}] ")), None)
@@ -99,5 +91,3 @@ def _lighting(cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRe
         elif dark:
             rec.warn(f"lighting.lights[{i}] ({lt.kind}) lights nothing: it {eff['reason']}")
 
-
-_CHECKS: dict[str, Any] = {"import": _import, "bsp": _bsp, "lighting": _lighting}

@@ -56,7 +56,6 @@ import os
 import platform
 import struct
 import sys
-import tempfile
 import time
 import types
 from dataclasses import dataclass
@@ -66,6 +65,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from . import __version__
+from .files import write_atomic
 
 FORMAT = 1
 MAGIC = b"SBAKE-STAGE\x00"
@@ -441,15 +441,6 @@ def decode_entry(buf: np.ndarray, key: str, stage: str) -> Any:
 
 
 # --------------------------------------------------------------------------- stores
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-_MODE = 0o666 & ~_umask()  # files get the usual mode, not mkstemp's 0o600
-
-
 class DiskStore:
     """Entries and manifests as files in one folder, least recently used dropped past ``max_bytes``.
 
@@ -493,23 +484,8 @@ class DiskStore:
         if self.pending is not None:
             self.pending.append((name, chunks))
             return
-        self.root.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=TMP_SUFFIX, dir=self.root)
-        try:
-            try:
-                os.fchmod(fd, _MODE)
-            except OSError:
-                pass
-            with os.fdopen(fd, "wb") as f:
-                for c in chunks:
-                    f.write(c)
-            os.replace(tmp, self._path(name))
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
+        # (not flushed to disk: an entry lost to a crash is computed again)
+        write_atomic(self._path(name), chunks, suffix=TMP_SUFFIX, sync=False, keep_mode=False)
 
     def remove(self, name: str) -> None:
         try:
@@ -844,7 +820,7 @@ class Memo:
     work depends on less than the stage's key: the BSP tree, which depends on the geometry and the
     merge groups and not on the lit colours (bake/bsp/stage.py); the previews' renders, which
     depend on the written geometry, the draw order and the camera and not on the colours
-    (bake/export/preview.py). The caller names everything the result depends on
+    (bake/outputs/preview.py). The caller names everything the result depends on
     (:meth:`key`: the cache format, the tool fingerprint, a kind and those values' digest). Memos
     are entries of the stage cache's store (same format, checks, size cap and LRU); a damaged one
     is dropped with a warning and recomputed."""

@@ -66,7 +66,7 @@ def _wrote_lines(out: Path, rep: dict[str, Any], cfg: config_mod.Config) -> list
 
 def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfile: Path | None) -> dict[str, Any]:
     from . import pipeline
-    from .export import output, report
+    from .outputs import output, report
 
     _check_output_names(cfg)
     output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
@@ -198,7 +198,6 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     import numpy as np
 
     from . import pipeline
-    from .export import lists as export_lists
 
     cfg = pipeline.load_config_for(Path(args.target), args.set)
     result = pipeline.run(cfg, until="clean")
@@ -208,7 +207,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         u, c = np.unique(scene.poly_sizes, return_counts=True)
         sizes = {str(int(k)): int(v) for k, v in zip(u, c)}
     b = scene.bounds()
-    exported, _ = export_lists.stage(scene, cfg.export)
+    exported, _ = pipeline.run_stage("export", scene, cfg)
     info = exported.artefacts["list_info"]
     data = {
         "file": str(scene.source.path),
@@ -261,7 +260,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else _default_out(target)
     cfg.cache.out_dir = out_dir  # the sweep reuses (and fills) the bake's stage cache
     out = out_dir / "sweeps" / key
-    from .export import output
+    from .outputs import output
 
     output.check_paths(out_dir)
     if out_dir.is_dir() and (out_dir / "sweeps").exists():
@@ -275,7 +274,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     table = sweep_mod.sweep(cfg, key, values, reference=reference, out=out, progress=progress)
     html_written = False
     if (out_dir / "report.json").is_file() and cfg.report.html:  # show it in the bake's report
-        from .export import html
+        from .outputs import html
 
         w = cfg.report.preview_width
         html.write(out_dir, width=w, height=max(1, w * 3 // 4))
@@ -310,7 +309,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .export import html
+    from .outputs import html
 
     out = Path(args.out_dir)
     if not out.is_dir():
@@ -475,7 +474,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.close()
         return 0
     except KeyboardInterrupt as e:
-        from .export import write
+        from .outputs import write
 
         what = "terminated" if isinstance(e, Terminated) else "interrupted"
         state = ("after the outputs were written (the output folder is the new bake's)" if write.COMMITTED else

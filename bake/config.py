@@ -984,7 +984,7 @@ def get_key(cfg: Any, key: str) -> Any:
 
 # Names in the output folder that every bake writes (the reports, the list and asset folders,
 # bake watch's script, the sweeps, the xatlas cache and the manifest of what the bake wrote,
-# bake/export/write.py's MANIFEST): no configured output name may take one.
+# bake/outputs/write.py's MANIFEST): no configured output name may take one.
 RESERVED_OUTPUT_NAMES = ("report.json", "report.md", "report.html", "report-live.js", "lists", "assets", "sweeps",
                          ".bake-cache", ".bake-manifest.json")
 
@@ -1011,8 +1011,6 @@ def validate(cfg: Config) -> None:
     need(s.peak_rounds >= 0, "mesh.simplify.peak_rounds", "must be >= 0")
     need(s.error_ceiling >= 0, "mesh.simplify.error_ceiling", "must be >= 0 (0 = none)")
     need(s.error_samples >= 100, "mesh.simplify.error_samples", "must be >= 100")
-    need(cfg.bvh.leaf_size >= 1, "bvh.leaf_size", "must be >= 1")
-    need(cfg.bvh.bins >= 2, "bvh.bins", "must be >= 2")
     need(cfg.bsp.candidates >= 0, "bsp.candidates", "must be >= 0 (0 = all)")
     need(cfg.bsp.leaf_max >= 1, "bsp.leaf_max", "must be >= 1")
     need(0 < cfg.bsp.epsilon < 1e-2, "bsp.epsilon", "must be > 0 and < 0.01")
@@ -1033,8 +1031,6 @@ def validate(cfg: Config) -> None:
     need(cfg.bsp.thorough_faces >= 0, "bsp.thorough_faces", "must be >= 0 (0 = never)")
     need(cfg.bsp.thorough_edge_factor >= 1, "bsp.thorough_edge_factor", "must be >= 1")
     need(cfg.cache.max_mb > 0, "cache.max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
-    need(cfg.lighting.ao.samples >= 1, "lighting.ao.samples", "must be >= 1")
-    need(cfg.lighting.bounces.count >= 0, "lighting.bounces.count", "must be >= 0")
     for key, name, blank in (("export.json_name", cfg.export.json_name, False),
                              ("export.sb3_name", cfg.export.sb3_name, True),
                              ("export.into_name", cfg.export.into_name, True)):

@@ -1,14 +1,14 @@
 """Plans which stages a config and scene call for, runs them, and records time and accuracy.
 
 A stage is a function ``(scene, section) -> (new scene, StageRecord)``. Stages do not import
-each other; this module is the only place that knows their order. Optional stages are switched
-by ``<section>.enabled``; the report says for every stage whether it ran and, if not, why.
+each other; the registry (``bake.stages``) lists them in order with their wiring, and this
+runner knows none of them by name. Optional stages are switched by ``<section>.enabled``; the
+report says for every stage whether it ran and, if not, why.
 """
 
 from __future__ import annotations
 
 import copy
-import importlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,82 +16,15 @@ from typing import Any, Callable, Collection
 
 import numpy as np
 
-from . import advice
+from . import stages as registry
 from . import progress as progress_mod
 from . import config as config_mod
-from .config import Config, ImportJob
+from .config import Config
 from .errors import BakeError, ConfigError, InputError, StageError
 from .record import StageRecord
+from .stages import STAGES, StageSpec, stages_for
 from .scene import MAX_COORDINATE, MIN_EXTENT, Scene
 from .scratch.numbers import position_decimals
-
-
-@dataclass(frozen=True)
-class StageSpec:
-    name: str
-    target: str  # "module:function"
-    section: Callable[[Config], Any]
-    enabled: Callable[[Config], bool]
-    switch: str | None  # the key that turns it on/off, for the report
-
-    def load(self) -> Callable[[Scene, Any], tuple[Scene, StageRecord]]:
-        mod_name, fn = self.target.split(":")
-        return getattr(importlib.import_module(mod_name), fn)
-
-
-def _import_job(cfg: Config) -> ImportJob:
-    p = Path(cfg.input.path)
-    if not p.is_absolute():
-        p = cfg.base_dir / p
-    return ImportJob(path=p, format=cfg.input.format, strict=cfg.import_.strict,
-                     scene=cfg.import_.scene)
-
-
-def _textures_section(cfg: Config):
-    """The textures section, told whether the lighting stage will bake into its lightmap atlas."""
-    import dataclasses
-
-    lit = cfg.lighting.enabled and cfg.lighting.target == "lightmap"
-    return dataclasses.replace(cfg.textures, lightmap=dataclasses.replace(cfg.textures.lightmap, lit=lit))
-
-
-def _always(_: Config) -> bool:
-    return True
-
-
-STAGES: tuple[StageSpec, ...] = (
-    StageSpec("import", "bake.importers:stage", _import_job, _always, None),
-    StageSpec("transform", "bake.mesh.transform:stage", lambda c: c.transform, _always, None),
-    StageSpec("triangulate", "bake.mesh.triangulate:stage", lambda c: c.mesh.triangulate, _always, None),
-    StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean,
-              lambda c: c.mesh.clean.enabled, "mesh.clean.enabled"),
-    StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify,
-              lambda c: c.mesh.simplify.enabled, "mesh.simplify.enabled"),
-    StageSpec("textures", "bake.textures.stage:stage", _textures_section,
-              lambda c: c.textures.enabled, "textures.enabled"),
-    StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting,
-              lambda c: c.lighting.enabled, "lighting.enabled"),
-    StageSpec("bsp", "bake.bsp.stage:stage", lambda c: c.bsp, lambda c: c.bsp.enabled, "bsp.enabled"),
-    StageSpec("bvh", "bake.bvh.stage:stage", lambda c: c.bvh, lambda c: c.bvh.enabled, "bvh.enabled"),
-    StageSpec("export", "bake.export.lists:stage", lambda c: c.export,
-              lambda c: c.export.enabled, "export.enabled"),
-)
-
-
-# the pipeline stage(s) that read a config key, by key prefix (first match): a sweep reports their
-# seconds, and a key set in a section whose stages do not run is said to change nothing
-STAGES_OF_KEY = (("mesh.simplify.", ("simplify",)), ("mesh.clean.", ("clean",)),
-                 ("mesh.triangulate.", ("triangulate",)), ("textures.lightmap.", ("textures", "lighting")),
-                 ("textures.", ("textures",)), ("lighting.", ("lighting",)), ("bsp.", ("bsp",)),
-                 ("bvh.", ("bvh",)), ("export.", ("export",)), ("transform.", ("transform",)),
-                 ("import.", ("import",)))
-
-
-def stages_for(key: str) -> tuple[str, ...]:
-    for prefix, stages in STAGES_OF_KEY:
-        if key.startswith(prefix):
-            return stages
-    return ()
 
 
 def unused_settings(cfg: Config, ran: Collection[str], idle: dict[str, str] | None = None) -> list[str]:
@@ -113,21 +46,13 @@ def unused_settings(cfg: Config, ran: Collection[str], idle: dict[str, str] | No
             for stage, keys in unused.items()]
 
 
-# Stages that build on the positions as the export will write them (docs/formats.md, "Numbers").
-GRID_USERS = ("bsp", "export")
-
-
 def with_grid(scene: Scene, cfg: Config) -> Scene:
     """The scene with the grid its positions will be written on (``export.precision`` of the
-    scene's size), fixed once, before the first stage in GRID_USERS runs. Stages read it from the
+    scene's size), fixed once, before the first stage that is ``on_grid`` runs. Stages read it from the
     scene, never from the export section."""
     if scene.position_decimals is not None or not cfg.export.enabled:
         return scene
     return scene.replace(position_decimals=position_decimals(scene.scale(), cfg.export.precision))
-
-
-def stage_names() -> list[str]:
-    return [s.name for s in STAGES]
 
 
 def stage_count(cfg: Config) -> int:
@@ -233,7 +158,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
                 shown = _from_cache(rec, hit.seconds if k == hit.index else 0.0)
                 # advice reads the config beyond the stage's section (the import's warning about
                 # textures.enabled): given again for this bake's config
-                advice.after_stage(rec.name, cfg, scene, shown, records)
+                _advise(registry.spec(rec.name), cfg, scene, shown, records)
                 records.append(shown)
                 if progress:
                     progress(rec.name, "skipped" if rec.idle else "cached")
@@ -244,7 +169,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     for i in range(start, len(active)):
         spec = active[i]
         fn = spec.load()
-        if spec.name in GRID_USERS:
+        if spec.on_grid:
             scene = with_grid(scene, cfg)
         if progress:
             progress(spec.name, "start")
@@ -262,10 +187,10 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
         except MemoryError:
             raise StageError(f"stage '{spec.name}' ran out of memory") from None
         rec.seconds = rec.seconds or (time.perf_counter() - t)
-        if spec.name == "import" and scene.n_polygons == 0:
+        if spec.leaves == "faces" and scene.n_polygons == 0:
             why = "; ".join(rec.warnings[:3])
             raise InputError("has no faces to bake" + (f" ({why})" if why else ""), path=scene.source.path)
-        if until is None and spec.name in ("triangulate", "clean") and scene.triangles is not None \
+        if until is None and spec.leaves == "triangles" and scene.triangles is not None \
                 and scene.n_triangles == 0:
             # every face had repeated corners or no area: an empty bake is not what was asked for
             # (`bake inspect`, which stops at clean, shows such a model instead)
@@ -273,14 +198,14 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             raise InputError(f"has no triangles left to bake after {spec.name}: every face is degenerate "
                              "(repeated corners, or an area under mesh.clean.area_tolerance)"
                              + (f" ({why})" if why else ""), path=scene.source.path)
-        if spec.name in ("import", "transform"):
+        if spec.checks_coordinates:
             check_coordinates(scene, spec.name, cfg)
         if not rec.counts_in:
             rec.counts_in = counts_in
         if not rec.counts_out:
             rec.counts_out = counts(scene)
         cold.append(copy.deepcopy(rec))  # as computed: what the cache stores (advice is added per bake)
-        advice.after_stage(spec.name, cfg, scene, rec, records)
+        _advise(spec, cfg, scene, rec, records)
         for w in pending:
             rec.warn(w)
         pending = []
@@ -353,18 +278,30 @@ def check_sections(cfg: Config) -> None:
     """The range checks the stages hold for their sections, run before the bake whether the stage
     runs or not (a bad value under a switch that is off would otherwise wait, unsaid, for the day
     the switch is turned on)."""
-    for target, section in SECTION_CHECKS:
-        mod_name, fn = target.split(":")  # (loaded by name, as the stages are)
+    for spec in STAGES:
+        check = spec.load_check()
+        if check is None:
+            continue
         try:
-            getattr(importlib.import_module(mod_name), fn)(section(cfg))
+            check(spec.section(cfg))
         except ConfigError as e:
             raise _in_config_file(e, cfg) from None
 
 
-# the stages' own range checks of their sections ("module:function", the section), see check_sections
-SECTION_CHECKS = (("bake.lighting.plan:check_config", lambda c: c.lighting),
-                  ("bake.textures.stage:check_config", lambda c: c.textures),
-                  ("bake.bvh.stage:check_config", lambda c: c.bvh))
+def _advise(spec: StageSpec, cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
+    """The stage's advice (``StageSpec.advice``), added to its record."""
+    check = spec.load_advice()
+    if check is not None:
+        check(cfg, scene, rec, records)
+
+
+def run_stage(name: str, scene: Scene, cfg: Config) -> tuple[Scene, StageRecord]:
+    """One stage on a given scene, with its section of ``cfg`` (``bake inspect`` shows the lists
+    the export stage would write of the mesh as cleaned)."""
+    spec = registry.spec(name)
+    if spec.on_grid:
+        scene = with_grid(scene, cfg)
+    return spec.load()(scene, spec.section(cfg))
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:

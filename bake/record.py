@@ -69,3 +69,17 @@ def _num(v: Any) -> Any:
     if f != f or f in (float("inf"), float("-inf")):
         return None
     return f
+
+
+@dataclass
+class ReportSection:
+    """A stage's own section of report.html, as plain text (the outputs render it): a title, rows
+    of (label, text), and optionally a note and a table under them (``head``: column titles;
+    ``numeric``: which columns hold numbers; ``table``: rows of cell texts)."""
+
+    title: str
+    rows: list[tuple[str, str]]
+    note: str = ""
+    head: tuple[str, ...] = ()
+    numeric: tuple[bool, ...] = ()
+    table: list[tuple[str, ...]] = field(default_factory=list)

@@ -49,28 +49,20 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import config as config_mod
-from .export.write import write_atomic
+from .files import write_atomic
 from .config import Config
 from .errors import ConfigError
-from .pipeline import stages_for
+from .stages import spec, stages_for
 from .scene import Scene
 
-# the figure plotted as "error" per stage: (row key, label); others use the image error
-ERROR_OF_STAGE = {"simplify": ("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
-                  "lighting": ("rmse", "RMSE of shown colours against the reference (0..1)"),
-                  "bsp": ("inflation", "triangles added by splits (fraction of the input)"),
-                  "bvh": ("sah_cost", "SAH cost (expected node + triangle tests per ray)"),
-                  "export": ("position_error", "largest position rounding error, fraction of the diagonal "
-                                               "(a bound: half the rounding step)")}
+# the figure plotted as "error" for a key whose first stage names none (StageSpec.error)
 IMAGE_ERROR = ("image_rmse", "RMSE of preview images against the reference (0..1)")
 PREVIEW_SIZE = (160, 120)
 
 
 def error_of(key: str) -> tuple[str, str]:
     st = stages_for(key)
-    if key.startswith("textures.lightmap."):
-        return IMAGE_ERROR
-    return ERROR_OF_STAGE.get(st[0], IMAGE_ERROR) if st else IMAGE_ERROR
+    return (spec(st[0]).error or IMAGE_ERROR) if st else IMAGE_ERROR
 
 
 def parse_vary(text: str, option: str = "--vary") -> tuple[str, list[float]]:
@@ -147,14 +139,14 @@ def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -
     the key's from ``stage_cache`` when it has them)."""
     t0 = time.perf_counter()
     if scene is not None:
-        from .lighting.stage import stage
+        from .pipeline import run_stage
 
         if not key.startswith("lighting."):
             raise ConfigError("sweeping a given scene supports lighting keys only", key=key)
-        out, rec = stage(scene, cfg.lighting)
+        out, rec = run_stage("lighting", scene, cfg)
         r = rec.to_json()
         return _Run(out, {"lighting": r}, r["seconds"], time.perf_counter() - t0)
-    from .export import report as report_mod
+    from .outputs import report as report_mod
     from .pipeline import run
 
     seen: dict[str, Scene] = {}
@@ -184,7 +176,7 @@ def _mesh(run: _Run):
     """The mesh as the export wrote it (lists.json), for previews; None without export."""
     if run.lists is None or run.report is None:
         return None
-    from .export import html, preview
+    from .outputs import html, preview
 
     textures = html.decoded_textures(run.lists, run.report, {})
     lm = next((t for t in textures if t["name"] == "lightmap"), None)
@@ -197,7 +189,7 @@ def _previews(mesh, cams) -> list[np.ndarray] | None:
     """Depth-buffer previews of a written mesh from the given cameras (uint8 RGB)."""
     if mesh is None or cams is None:
         return None
-    from .export import preview
+    from .outputs import preview
     from .render import render
 
     two = mesh.two_sided[mesh.material] if len(mesh.two_sided) else None
@@ -325,7 +317,7 @@ def sweep(config: str | Path | Config, key: str, values: Sequence[float], refere
     ref_mesh = _mesh(ref_run) if ref_run is not None else None
     cams = None
     if ref_mesh is not None:
-        from .export.preview import cameras
+        from .outputs.preview import cameras
 
         cams = cameras(ref_mesh.verts, *PREVIEW_SIZE)
     say("rendering previews and comparing with the reference")

@@ -11,7 +11,7 @@ at the first stage whose inputs changed.
 Every bake prints one line (time, model, triangles, vertices, list bytes, seconds, which stages
 came from the cache, exceeded limits); a bake that fails prints its one-line error and the watch
 goes on with the last good outputs left in place. report.html is written with a reload script
-(``bake.export.html.live_script``) so a browser showing it reloads after each bake. Ctrl-C (or
+(``bake.outputs.html.live_script``) so a browser showing it reloads after each bake. Ctrl-C (or
 SIGTERM) ends the watch: the bake under way stops (outputs are written atomically, so the folder
 keeps the last complete bake), report-live.js is removed, the exit status is 0.
 """
@@ -105,7 +105,7 @@ def _stamp() -> str:
     return time.strftime("%H:%M:%S")
 
 
-def _fmt_bytes(n: int) -> str:
+def fmt_bytes(n: int) -> str:
     return f"{n / 1024:.1f} KiB" if n < 1024 * 1024 else f"{n / 1024 / 1024:.2f} MiB"
 
 
@@ -115,7 +115,7 @@ def one_line(rep: dict, out: Path, seconds: float) -> str:
     name = Path(rep["input"]["path"] or "model").name
     total = sum(v["bytes"] for v in rep["lists"].values())
     parts = [f"{name}: {s['triangles']:,} triangles, {s['vertices']:,} vertices, {len(rep['lists'])} lists "
-             f"{_fmt_bytes(total)}, in {seconds:.2f} s"]
+             f"{fmt_bytes(total)}, in {seconds:.2f} s"]
     cached = (rep.get("cache") or {}).get("from_cache") or []
     if cached:
         parts.append("from the cache: " + (cached[0] if len(cached) == 1 else f"{cached[0]}..{cached[-1]}"))
@@ -132,7 +132,7 @@ def bake_once(target: Path, overrides: list[str], out: Path, *, quiet: bool) -> 
     """One bake as ``bake run`` does it, with a live report.html. Returns the files it read (to
     watch) and the report. Raises BakeError (the files known so far are in ``err.watch``)."""
     from . import pipeline
-    from .export import output
+    from .outputs import output
     from .progress import StageProgress
 
     files = {os.path.abspath(target)}
@@ -206,7 +206,7 @@ def watch(target: Path, overrides: list[str], out: Path, *, quiet: bool = False,
         watcher.stop()
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
-        from .export.html import LIVE_NAME
+        from .outputs.html import LIVE_NAME
 
         try:
             (out / LIVE_NAME).unlink()

@@ -239,7 +239,7 @@ def sweeps(tmp: Path, repeat: int, skip_base: bool) -> dict:
 
 
 def watch_latency(tmp: Path, edits: int = 3) -> dict:
-    from bake.export import html
+    from bake.outputs import html
 
     src = BUNNY.read_text()
     model = (BUNNY.parent / re.search(r'path = "([^"]+)"', src).group(1)).resolve()

@@ -23,7 +23,7 @@ archive`` into a temporary folder and run from there, nothing of it is kept). Fo
   ``export.turbowarp_fencing = false`` writes removed), in the same interleaved rounds: what
   turning fencing off buys (``new_fencing_on`` in the JSON);
 * the image agreement of the new reader's stage with the green flag preview
-  (``bake.export.preview.stage_agreement``).
+  (``bake.outputs.preview.stage_agreement``).
 
 Writes ``benchmarks/results/player.json`` and prints a markdown table. Times depend on the load
 of the machine (the JSON records ``os.getloadavg()`` before and after): quote the ratios.
@@ -212,7 +212,7 @@ def main() -> None:
         # JIT included), old and new alternating, --fresh times each
         fresh = turbowarp.run([(f"{n}-{w}#{k}", p) for k in range(args.fresh) for n, w, p in baked],
                               modes=("compiled", "interpreted"), repeat=1)
-        from bake.export import preview
+        from bake.outputs import preview
         from bake.scratch.project import auto_camera
 
         for name, who, out in baked:

@@ -87,11 +87,11 @@ def write_obj_lines(path: Path, lines: int) -> None:
 # --------------------------------------------------------------------------- children
 CHILD = r'''
 import json, pickle, resource, sys, time, tracemalloc
-from bake import config as config_mod, pipeline
+from bake import config as config_mod, pipeline, stages
 args = json.loads(sys.argv[1])
 cfg = config_mod.load(None, data=args["config"])
 cfg.input.path = args["model"]
-spec = next(s for s in pipeline.STAGES if s.name == args["stage"])
+spec = next(s for s in stages.STAGES if s.name == args["stage"])
 if args["input"]:
     with open(args["input"], "rb") as f:
         scene = pickle.load(f)

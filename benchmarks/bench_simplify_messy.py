@@ -116,7 +116,7 @@ def picture(a, b, defects: dict) -> dict:
     """Previews of ``b`` against ``a`` from the report's four cameras (culled by material
     sidedness, as the reader draws): the RMSE over every pixel, and per kind of defect (its
     triangles' ids in ``b``) the share of the pixels they cover and the RMSE over those."""
-    from bake.export.preview import cameras
+    from bake.outputs.preview import cameras
     from bake.render import render_scene
 
     cams = cameras(np.asarray(a.positions), *VIEW)

@@ -324,7 +324,7 @@ def test_an_input_that_changes_during_the_bake_is_not_cached(tmp_path, monkeypat
     model = write_model(tmp_path / "m")
     cfg = tmp_path / "m" / "b.toml"
     cfg.write_text(CONFIG_B)
-    import bake.importers as importers
+    import bake.importers.stage as importers
 
     real = importers.stage
 

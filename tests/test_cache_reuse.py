@@ -1,6 +1,6 @@
 """Reuse inside a stage that must run again (bake.cache.Memo): the BSP tree when only colours
 changed (bake/bsp/stage.py: tree_key_parts, recolour) and the previews' geometry
-(bake/export/preview.py: render_view). Every reuse must give the bytes a cold computation gives;
+(bake/outputs/preview.py: render_view). Every reuse must give the bytes a cold computation gives;
 a colour change that alters a decision the build made with colours (merge groups, merges, which
 cut corners became one vertex) must build the tree again; a damaged memo is ignored with a
 warning."""
@@ -17,7 +17,7 @@ import pytest
 from bake import cache as cache_mod
 from bake import cli, pipeline
 from bake.bsp.stage import stage as bsp_stage
-from bake.export import html
+from bake.outputs import html
 
 from test_cache import _entry_of, _flip, bake, outputs, write_model
 

@@ -218,7 +218,7 @@ def test_reserved_output_names_cover_what_the_bake_writes_beside_its_outputs():
     """config.RESERVED_OUTPUT_NAMES repeats names other modules own (the reports, report.html's
     live script and sweep folder, the list and asset folders, the xatlas cache): it must keep
     every one of them, or a configured output name could take one again."""
-    from bake.export import html, output
+    from bake.outputs import html, output
     from bake.export.lists import list_file_name
     from bake.textures.lightmap import CACHE_SUBDIR
 

@@ -1,11 +1,13 @@
 """The package layout (shared/docs/layout.md): no import circles, and Scratch-format knowledge in
 one room (``bake/scratch/``) that the stages hand data to, never the other way round.
 
-Every ``import`` counts, including those inside functions (a lazy import is still a circle)."""
+Every ``import`` counts, including those inside functions (a lazy import is still a circle), and
+so does every ``"bake.module:function"`` string (the stage registry loads stages by such names)."""
 
 from __future__ import annotations
 
 import ast
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -39,10 +41,16 @@ def import_graph() -> dict[str, set[str]]:
                 else:
                     mod = node.module or ""
                 targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in mods else mod for a in node.names]
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                m = LOADED.fullmatch(node.value)
+                targets = [m.group(1)] if m else []
             for t in targets:
                 if t in mods and t != name:
                     graph[name].add(t)
     return graph
+
+
+LOADED = re.compile(r"(bake(?:\.\w+)+):\w+")  # a function loaded by name
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -81,6 +89,7 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def _package(mod: str) -> str:
+    """The room of a module: its package under bake/, or itself for a module at bake/'s root."""
     return ".".join(mod.split(".")[:2])
 
 
@@ -90,6 +99,8 @@ def test_the_graph_sees_lazy_imports():
     # bake.scratch.check inside a function: both must be edges
     assert "bake.textures.lightmap" in g["bake.lighting.lightmap"]
     assert "bake.scratch.check" in g["bake.cli"]
+    # the registry's names are arrows: the pipeline reaches every stage through it
+    assert {"bake.importers.stage", "bake.export.stage", "bake.bsp.report", "bake.lighting.plan"} <= g["bake.stages"]
     assert _cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [["a", "b"]]
 
 
@@ -104,6 +115,29 @@ def test_no_package_import_circles():
             if _package(a) != _package(b) and _package(b) != "bake":
                 pg[_package(a)].add(_package(b))
     assert _cycles(pg) == []
+
+
+def test_only_what_runs_after_the_bake_imports_the_runner():
+    """The pipeline runs the stages; the commands and the outputs (reports, HTML, files) run it.
+    Nothing it runs may import it back."""
+    above = {"bake.cli", "bake.sweep", "bake.watch"}
+    bad = {a for a, bs in import_graph().items() if "bake.pipeline" in bs
+           and a not in above and _package(a) != "bake.outputs"}
+    assert bad == set()
+
+
+def test_the_export_stage_is_apart_from_the_outputs():
+    """bake/export/ holds the export stage; writing files, reports and previews is bake/outputs/,
+    which no stage imports."""
+    stage_rooms = {_package(s.entry.split(":")[0]) for s in _registry()}
+    bad = {(a, b) for a, bs in import_graph().items() if _package(a) in stage_rooms - {"bake.outputs"}
+           for b in bs if _package(b) == "bake.outputs"}
+    assert bad == set() and "bake.outputs" not in stage_rooms
+
+
+def _registry():
+    from bake.stages import STAGES
+    return STAGES
 
 
 def test_scratch_room_depends_on_no_stage():

@@ -59,11 +59,11 @@ def test_bsp_advice_aims_simplify_lower_only_where_simplify_reached_its_target()
     cfg.mesh.simplify.enabled = True
     cfg.mesh.simplify.target_triangles = 3000
     records, bsp = _records(3000, 6000)
-    advice.after_stage("bsp", cfg, make_scene(np.zeros((3, 3)), [[0, 1, 2]]), bsp, records)
+    advice.bsp_size(cfg, make_scene(np.zeros((3, 3)), [[0, 1, 2]]), bsp, records)
     assert any("aim simplify lower" in w and "target_triangles = 1500" in w for w in bsp.warnings)
     # simplify stopped at the whole input (defects refused): a lower target would change nothing
     records, bsp = _records(10_000, 19_000)
-    advice.after_stage("bsp", cfg, make_scene(np.zeros((3, 3)), [[0, 1, 2]]), bsp, records)
+    advice.bsp_size(cfg, make_scene(np.zeros((3, 3)), [[0, 1, 2]]), bsp, records)
     (w,) = bsp.warnings
     assert "aim simplify lower" not in w and "stopped at 10,000" in w and "bsp.split_weight" in w
 
@@ -207,7 +207,7 @@ def test_clean_says_why_it_dropped_triangles_and_the_summary_says_what_counts_me
 
 
 def test_summary_counts_are_whole_numbers_with_their_meaning():
-    from bake.export.report import _summary_figure
+    from bake.outputs.report import _summary_figure
 
     assert _summary_figure("folds", 13000) == "13,000 (pairs of neighbouring triangles facing each other)"
     assert _summary_figure("hausdorff_max", 0.0123) == "1.23%"
@@ -319,10 +319,10 @@ def test_export_into_prints_the_merged_projects_size_and_the_bakes_own(tmp_path,
     merged = next(p for p in out.glob("engine-*.sb3"))
     own = out / "grid.sb3"
     size = {p: zipfile.ZipFile(p).getinfo("project.json").file_size for p in (merged, own)}
-    from bake.export.report import _fmt_bytes
+    from bake.scratch.limits import fmt_bytes
 
-    assert f"{_fmt_bytes(size[merged])} of 5 MiB" in line and f"in {merged.name} (the bake merged into engine.sb3)" in line
-    assert f"the bake's own .sb3: {_fmt_bytes(size[own])}" in line
+    assert f"{fmt_bytes(size[merged])} of 5 MiB" in line and f"in {merged.name} (the bake merged into engine.sb3)" in line
+    assert f"the bake's own .sb3: {fmt_bytes(size[own])}" in line
 
 
 # --------------------------------------------------------------------------- 10. a textured model, by default
@@ -345,7 +345,7 @@ def _green_flag(out):
     """The green flag's stage as report.html previews it (from the written lists and report)."""
     import json
 
-    from bake.export import preview
+    from bake.outputs import preview
     from bake.scratch.project import auto_camera
 
     rep = json.loads((out / "report.json").read_text())

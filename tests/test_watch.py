@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from bake.export import html
+from bake.outputs import html
 from bake.progress import StageProgress
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -84,12 +84,18 @@ def written_positions(scene: Scene) -> np.ndarray:
 GRID_TIE = 2.0
 
 
+def tie_tolerance(epsilon: float, decimals: int | None, size: float) -> float:
+    """The on-plane tolerance (fraction of ``size``, the model's diagonal): ``epsilon``, or two
+    steps of the grid of ``decimals`` when that is coarser (faces that close can swap sides when
+    their corners are rounded). The one definition: the tree's, and the previews' ties."""
+    if decimals is None:
+        return epsilon
+    return max(epsilon, GRID_TIE * 10.0 ** -decimals / size)
+
+
 def tolerance(scene: Scene, opt: BuildOptions) -> float:
-    """The tree's on-plane tolerance (fraction of the diagonal): ``epsilon``, or two grid steps
-    when that is coarser (faces that close can swap sides when their corners are rounded)."""
-    if scene.position_decimals is None:
-        return opt.epsilon
-    return max(opt.epsilon, GRID_TIE * 10.0 ** -scene.position_decimals / frame(scene)[1])
+    """The tree's on-plane tolerance: :func:`tie_tolerance` of the scene's grid."""
+    return tie_tolerance(opt.epsilon, scene.position_decimals, frame(scene)[1])
 
 
 def tri_two_sided(scene: Scene) -> np.ndarray:

@@ -652,18 +652,26 @@ class _Parser:
         out[row, col] = vals[src]
         return out
 
-    def vertices(self, lines: np.ndarray, first: int) -> None:
-        got = self._floats(_V, "v", lines, _E_V_NUMBER)
+    def _xyz(self, pattern, tag: str, lines: np.ndarray, e_number: int, e_few: int, what: str):
+        """The numbers of lines that need at least x y z (``v``, ``vn``): (values, count per line,
+        the file's line numbers), or None once an error is recorded."""
+        got = self._floats(pattern, tag, lines, e_number)
         if got is None:
-            return
+            return None
         vals, counts = got
         ln = self.t.line_no
         few = counts < 3
         if few.any():
             i = int(np.argmax(few))
-            self._fail(_E_V_FEW, f"vertex needs x y z, got {int(counts[i])} value(s)",
-                       int(ln[lines[i]]))
+            self._fail(e_few, f"{what} needs x y z, got {int(counts[i])} value(s)", int(ln[lines[i]]))
+            return None
+        return vals, counts, ln
+
+    def vertices(self, lines: np.ndarray, first: int) -> None:
+        got = self._xyz(_V, "v", lines, _E_V_NUMBER, _E_V_FEW, "vertex")
+        if got is None:
             return
+        vals, counts, ln = got
         if self.best < _E_V_NONFINITE:
             return
         odd = (counts == 5) | (counts > 7)
@@ -731,16 +739,10 @@ class _Parser:
     def normals(self, lines: np.ndarray) -> None:
         """``vn x y z`` lines are checked like ``vt`` lines (bake recomputes normals and keeps
         none of them): a malformed number, fewer than three values or a NaN is an error."""
-        got = self._floats(_VN, "vn", lines, _E_VN_NUMBER)
+        got = self._xyz(_VN, "vn", lines, _E_VN_NUMBER, _E_VN_FEW, "vertex normal")
         if got is None:
             return
-        vals, counts = got
-        ln = self.t.line_no
-        few = counts < 3
-        if few.any():
-            i = int(np.argmax(few))
-            self._fail(_E_VN_FEW, f"vertex normal needs x y z, got {int(counts[i])} value(s)", int(ln[lines[i]]))
-            return
+        vals, counts, ln = got
         if self.best < _E_VN_NONFINITE:
             return
         bad = ~np.isfinite(self._rows(vals, counts, 3)).all(axis=1)

@@ -89,18 +89,23 @@ def _float32(positions: np.ndarray) -> np.ndarray:
     return pos
 
 
+def _buffers(positions: np.ndarray, triangles: np.ndarray):
+    """The library and what its simplifiers read and write: (lib, the indices as uint32, the
+    positions as :func:`_float32`, room for the result's indices)."""
+    lib = _lib()
+    if lib is None:
+        raise RuntimeError("meshoptimizer is not installed")
+    idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
+    return lib, idx, _float32(positions), np.empty(max(len(idx), 3), dtype=np.uint32)
+
+
 def simplify_sloppy(positions: np.ndarray, triangles: np.ndarray, target_triangles: int) -> tuple[np.ndarray, float]:
     """meshoptimizer's vertex-clustering simplifier: reaches about ``target_triangles`` whatever
     the topology (seams, borders, soups of separate triangles), at the cost of merging vertices
     that are near each other without regard to what they belong to. Returns (triangles indexing
     ``positions``, the library's error estimate relative to the mesh extent)."""
-    lib = _lib()
-    if lib is None:
-        raise RuntimeError("meshoptimizer is not installed")
+    lib, idx, pos, dst = _buffers(positions, triangles)
     P = ctypes.POINTER
-    idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
-    pos = _float32(positions)
-    dst = np.empty(max(len(idx), 3), dtype=np.uint32)
     err = ctypes.c_float(0.0)
     n = lib.meshopt_simplifySloppy(dst.ctypes.data_as(P(ctypes.c_uint)), idx.ctypes.data_as(P(ctypes.c_uint)),
                                    len(idx), pos.ctypes.data_as(P(ctypes.c_float)), len(pos), 12,
@@ -116,13 +121,8 @@ def simplify(positions: np.ndarray, triangles: np.ndarray, target_triangles: int
     or until the next collapse would cost more than ``target_error`` (relative to the mesh
     extent, or absolute with ``absolute_error``). Returns (triangles (T', 3) int64 indexing
     ``positions``, the error meshoptimizer reports, in the same units as ``target_error``)."""
-    lib = _lib()
-    if lib is None:
-        raise RuntimeError("meshoptimizer is not installed")
+    lib, idx, pos, dst = _buffers(positions, triangles)
     P = ctypes.POINTER
-    idx = np.ascontiguousarray(np.asarray(triangles).reshape(-1), dtype=np.uint32)
-    pos = _float32(positions)
-    dst = np.empty(max(len(idx), 3), dtype=np.uint32)
     if attributes is not None:
         attr = np.ascontiguousarray(np.asarray(attributes, np.float64).reshape(len(pos), -1), dtype=np.float32)
         weights = np.ascontiguousarray(np.asarray(attribute_weights, np.float64).reshape(-1), dtype=np.float32)

@@ -38,6 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from .simplify_repair import edge_pairs
+
 __all__ = ["Layer", "fold_layer", "parts", "part_report"]
 
 
@@ -111,16 +113,8 @@ def parts(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int, bool]:
     T = len(F)
     if T == 0:
         return np.zeros(0, np.int64), 0, False
-    a, b = F.ravel(), F[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * max(n_vertices, 1) + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    same = ks[1:] == ks[:-1]
-    two = same.copy()
-    two[1:] &= ~same[:-1]
-    two[:-1] &= ~same[1:]
-    i = np.flatnonzero(two)
-    t1, t2 = order[i] // 3, order[i + 1] // 3
+    _, _, h1, h2 = edge_pairs(F)
+    t1, t2 = h1 // 3, h2 // 3
     g = sp.coo_matrix((np.ones(len(t1), np.int8), (t1, t2)), shape=(T, T))
     n, label = connected_components(g, directed=False)
     # numbered by first triangle, so the numbering does not depend on scipy's traversal

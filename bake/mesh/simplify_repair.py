@@ -269,7 +269,7 @@ class LocalError:
         return self.patches(V[F[tt]], rows, pts, prow, len(tris), sample=sample)
 
 
-def _edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The half-edges (k, k+1) of every triangle as flat arrays ``a -> b`` (index 3t + k), and
     the pairs ``(h1, h2)`` of half-edges on an edge shared by exactly two triangles."""
     a = F.ravel()
@@ -290,7 +290,7 @@ def _edge_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
 def edge_neighbours(F: np.ndarray) -> np.ndarray:
     """(t, 3) the triangle across each side (k, k+1) of each triangle (-1: open or shared by
     more than two)."""
-    _a, _b, h1, h2 = _edge_pairs(F)
+    _a, _b, h1, h2 = edge_pairs(F)
     nbr = np.full(3 * len(F), -1, np.int64)
     nbr[h1] = h2 // 3
     nbr[h2] = h1 // 3
@@ -301,7 +301,7 @@ def edge_neighbours(F: np.ndarray) -> np.ndarray:
 def _interior_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Edges shared by exactly two triangles running opposite ways: (t, u, side of t, side of u)
     (side k = corners k, k+1)."""
-    a, b, h1, h2 = _edge_pairs(F)
+    a, b, h1, h2 = edge_pairs(F)
     ok = a[h1] == b[h2]  # opposite directions (consistently oriented)
     h1, h2 = h1[ok], h2[ok]
     return h1 // 3, h2 // 3, h1 % 3, h2 % 3

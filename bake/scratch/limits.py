@@ -7,3 +7,12 @@ PROJECT_JSON_LIMIT = 5 * 1024 * 1024  # 5 MiB upload limit on scratch.mit.edu
 ASSET_LIMIT = 10_000_000  # each costume/sound must be under 10 MB to save on scratch.mit.edu
 # An empty project.json (stage, one sprite, backdrop and costume entries, meta) is about this size.
 PROJECT_BASE_BYTES = 1_500
+
+
+def fmt_bytes(n: int) -> str:
+    """A size as the reports print it: bytes, KiB (one decimal) or MiB (two)."""
+    if n >= 1024 * 1024:
+        return f"{n / 1024 / 1024:.2f} MiB"
+    if n >= 1024:
+        return f"{n / 1024:.1f} KiB"
+    return f"{n} B"

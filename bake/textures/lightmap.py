@@ -58,7 +58,7 @@ from scipy.sparse import linalg as sparse_linalg
 
 from ..config import LightmapConfig
 from ..errors import ConfigError, StageError
-from ..export.write import write_atomic
+from ..files import write_atomic
 from ..scene import Scene
 
 WORKER = Path(__file__).with_name("xatlas_worker.py")
@@ -263,7 +263,7 @@ def _cache_load(path: Path | None) -> dict | None:
 
 
 def _cache_store(path: Path | None, data: dict) -> None:
-    """Written like every output (``bake.export.write.write_atomic``: a flushed temporary beside
+    """Written like every output (``bake.files.write_atomic``: a flushed temporary beside
     the entry, then a rename; the usual file mode; a temporary left by a killed bake is removed
     by the next bake into that folder), so a reader never sees half an entry."""
     if path is None:

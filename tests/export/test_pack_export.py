@@ -72,7 +72,7 @@ def test_uvs_only_with_a_texture_in_the_project():
 
 
 def cli_report(res) -> str:
-    from bake.export import report
+    from bake.outputs import report
 
     return report.to_markdown(report.build(res))
 
@@ -114,7 +114,7 @@ def test_pack_keeps_files_plain_and_reports_sizes(tmp_path):
     for name, text in zip(names, stage["packed lists"]):
         assert P.unpack(text, name).items == lists[name]
     # report.json: packed bytes, plain bytes and decode blocks per list
-    from bake.export import report
+    from bake.outputs import report
 
     rep = report.build(res)
     assert rep["lists"]["verts"]["packed"]["decode_blocks"] > 0

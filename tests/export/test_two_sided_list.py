@@ -11,7 +11,7 @@ import numpy as np
 
 from bake import config as config_mod
 from bake.config import ExportConfig
-from bake.export.lists import stage
+from bake.export.stage import stage
 from bake.pipeline import run
 from bake.scene import Material, make_scene
 

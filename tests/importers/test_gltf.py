@@ -936,7 +936,7 @@ def test_draco_attribute_missing_from_compressed_data(corpus, tmp_path):
 
 
 def test_textured_material_without_uvs_warns_and_dispatch_reads_glb(tmp_path):
-    from bake.importers import stage
+    from bake.importers.stage import stage
     from bake.scene import Scene
 
     g = G()

@@ -255,12 +255,12 @@ def test_deterministic():
 
 
 def test_pipeline_runs_it_only_when_enabled():
-    from bake import pipeline
+    from bake import pipeline, stages
     from bake.config import Config
     c = Config()
     assert [on for spec, on, _ in pipeline.plan(c) if spec.name == "simplify"] == [False]
     c.mesh.simplify.enabled = True
-    spec = next(s for s in pipeline.STAGES if s.name == "simplify")
+    spec = next(s for s in stages.STAGES if s.name == "simplify")
     assert spec.enabled(c) and spec.load() is S.stage
 
 

@@ -3,7 +3,7 @@ renderer with the pen layer) in headless Chromium (vm/player.js, vm/turbowarp.py
 
 The green flag is pressed, the scripts must finish without a console or page error and leave a
 picture, and the stage must agree with report.html's "green flag" preview, rendered by the numpy
-rasterizer with the reader's own camera model (``bake.export.preview.stage_view``):
+rasterizer with the reader's own camera model (``bake.outputs.preview.stage_view``):
 
 * at every *interior* pixel (the preview shows the same triangle in the 5 x 5 pixels around it)
   the colour is the triangle's within one level per channel: the pen keeps colours as HSV, and
@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from bake import cli, config, pipeline
-from bake.export import preview
+from bake.outputs import preview
 from bake.scratch import blocks as B
 from bake.scratch import backdrop, sb3
 from bake.scratch.project import auto_camera

@@ -37,7 +37,7 @@ import numpy as np
 import pytest
 
 from bake import config as config_mod
-from bake import pipeline
+from bake import pipeline, stages
 from rel_util import Similarity, similarities, write_obj
 
 # --------------------------------------------------------------------------- scenes
@@ -421,7 +421,7 @@ def _module(name: str) -> Callable[[], str | None]:
 
 
 def _stage_in_pipeline(stage: str) -> Callable[[], str | None]:
-    return lambda: None if stage in pipeline.stage_names() else f"no '{stage}' stage in bake/pipeline.py yet"
+    return lambda: None if stage in stages.names() else f"no '{stage}' stage in bake/pipeline.py yet"
 
 
 def _lightmap_ready() -> str | None:

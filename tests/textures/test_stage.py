@@ -26,7 +26,6 @@ from bake import config as config_mod
 from bake import pipeline
 from bake.config import ExportConfig, LightConfig, LightingConfig, TexturesConfig
 from bake.errors import StageError
-from bake.export import lists as export_lists
 from bake.scratch import sb3
 from bake.scratch.limits import ASSET_LIMIT
 from bake.lighting import color as lighting_color
@@ -34,7 +33,7 @@ from bake.lighting import stage as lighting_stage
 from bake.scene import Material, make_scene
 from bake.scratch import colors, textimage
 from bake.textures import lightmap
-from bake.export.lists import stage as export_stage
+from bake.export.stage import stage as export_stage
 from bake.textures import stage as tstage
 from bake.colorspace import linear_to_srgb, srgb_to_linear
 from conftest import corpus_path
@@ -153,7 +152,7 @@ def test_encodings_decode_back_and_sizes_are_real(fmt, first_row, alpha, tmp_pat
     assert np.array_equal(pimg, res)
     # the record's sizes = what export writes
     enc = rec.details["textures"][0]["encodings"]
-    ex, _ = export_lists.stage(out, config_mod.ExportConfig(sb3=False, sprite3=False))
+    ex, _ = export_stage(out, config_mod.ExportConfig(sb3=False, sprite3=False))
     info = ex.artefacts["list_info"]
     assert enc["list"]["project_json_bytes"] == info["tex wood"]["project_json_bytes"] + \
         info["tex wood size"]["project_json_bytes"]
@@ -430,7 +429,7 @@ def test_textured_corpus_bakes_to_every_encoding(name, file, texture, tmp_path):
         assert max(t["size"]) <= 128
     assert len(rec.details["size_table"]) == 3 * len(rec.details["textures"])
     # export writes it all into a valid project
-    ex, _ = export_lists.stage(out, config_mod.ExportConfig(sprite3=False))
+    ex, _ = export_stage(out, config_mod.ExportConfig(sprite3=False))
     files = ex.artefacts["outputs"]
     blob = next(v for k, v in files.items() if k.endswith(".sb3"))
     p = tmp_path / "m.sb3"
@@ -452,7 +451,7 @@ def test_texture_costumes_reach_the_projects_and_assets(tmp_path):
     """The PNG costume of a texture is a file under assets/, a costume of a hidden "Textures"
     sprite in the .sb3 and of the .sprite3, byte-identical, and counted against the asset limit."""
     from bake import pipeline
-    from bake.export import output
+    from bake.outputs import output
     from bake.scratch import sb3
 
     cfg = pipeline.load_config_for(corpus_path("duck_glb", "Duck.glb"), ["textures.enabled=true"])

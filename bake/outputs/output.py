@@ -4,7 +4,7 @@
 be created and written, the depfile is not a folder, and no file the bake is known to read is
 where an output will go. :func:`finish` then stages everything -- lists, projects, textures,
 ``report.json``, ``report.md``, ``report.html`` (rendered from the staged bytes, not from the
-folder) and the depfile -- and commits it in one go (:class:`~bake.export.write.Outputs`), so
+folder) and the depfile -- and commits it in one go (:class:`~bake.outputs.write.Outputs`), so
 an interrupted bake leaves every file old or the whole folder new.
 """
 

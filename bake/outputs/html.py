@@ -27,8 +27,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .report import _fmt_bytes, cache_note, fmt_unit
-from .write import write_atomic
+from ..scratch.limits import fmt_bytes
+from .report import cache_note, fmt_unit
+from ..files import write_atomic
+from ..stages import STAGES
 
 HTML_NAME = "report.html"
 SWEEP_DIR = "sweeps"
@@ -183,8 +185,8 @@ def _limits_section(report: dict) -> str:
         frac = lim["value"] / lim["limit"] if lim["limit"] else 0.0
         cls = bar_class(frac)
         width = min(frac, 1.0) * 100
-        shown = _fmt_bytes(lim["value"]) if "bytes" in lim["name"] else f"{lim['value']:,}"
-        limit = _fmt_bytes(lim["limit"]) if "bytes" in lim["name"] else f"{lim['limit']:,}"
+        shown = fmt_bytes(lim["value"]) if "bytes" in lim["name"] else f"{lim['value']:,}"
+        limit = fmt_bytes(lim["limit"]) if "bytes" in lim["name"] else f"{lim['limit']:,}"
         rows.append(f"<tr><td>{_esc(lim['name'])}</td><td class=n>{shown}</td><td class=n>{limit}</td>"
                     f"<td><div class='bar {cls}' title='{frac:.1%}'><span style='width:{width:.1f}%'></span></div>"
                     f"</td><td class=n>{frac:.1%}</td><td>{'ok' if lim['ok'] else '<b class=bad>EXCEEDED</b>'}"
@@ -286,78 +288,41 @@ def _stages_section(report: dict) -> str:
             f"</tr>{''.join(eff)}</table>")
 
 
-def _bsp_section(report: dict) -> str:
-    """The BSP's cost to the author: triangles before and after, its lists' bytes, and one frame's
-    walk from the reader sprite's starting eye."""
-    st = next((x for x in report.get("stages", []) if x.get("name") == "bsp"), None)
-    d = (st or {}).get("details") or {}
-    if "inflation" not in d:
-        return ""
-    t_in = (st.get("counts_in") or {}).get("triangles", 0)
-    t_out = (st.get("counts_out") or {}).get("triangles", 0)
-    lists = d.get("lists", {})
-    nbytes = sum(v.get("project_json_bytes", 0) for v in lists.values())
-    rec = d.get("records", {})
-    w = d.get("walk") or {}
-    rows = [("triangles", f"{t_in:,} → {t_out:,} (+{d['inflation']:.1%})"),
-            ("records", f"{sum(rec.values()):,} ({rec.get('split', 0) + rec.get('split_two_sided', 0):,} split, "
-                        f"{rec.get('leaf', 0):,} leaf, {rec.get('peel', 0):,} peel); {d.get('planes', 0):,} planes"),
-            ("list bytes", f"{_fmt_bytes(nbytes)} in project.json ({d.get('bytes_per_triangle', 0):.1f} per triangle)")]
-    cr = d.get("crossing") or {}
-    if cr.get("pairs"):
-        rows.append(("parts through each other", f"{cr['pairs']:,} pairs of triangles cross ({cr['triangles']:,} "
-                                                 f"triangles in {cr['parts']} part(s)): one of each pair is cut, "
-                                                 "whatever the tree"))
-    if w:
-        rows.append(("one frame's walk", f"from the reader's starting eye: {w['plane_tests']:,} plane tests, "
-                                         f"{w['ranges']:,} ranges of {w['triangles']:,} triangles "
-                                         f"({w['facing']:,} face the eye); ≈ {w['blocks_estimate']:,} blocks "
-                                         "(estimate fitted to scratch-vm, docs/formats-bsp.md)"))
-    body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in rows)
-    return f"<h2>BSP: what painter's order costs</h2><table>{body}</table>"
+def _tie(report: dict, mesh) -> float:
+    """The previews' on-plane tolerance (fraction of the diagonal): the BSP tree's own when it
+    ran (report.json), else the same definition for the grid the export wrote."""
+    from ..bsp.stage import tie_tolerance
+
+    by_name = {x.get("name"): x for x in report.get("stages", [])}
+    made = (by_name.get("bsp") or {}).get("details") or {}
+    if "tolerance" in made:
+        return float(made["tolerance"])
+    decimals = (((by_name.get("export") or {}).get("details") or {}).get("positions") or {}).get("decimals")
+    size = float(np.linalg.norm(mesh.verts.max(0) - mesh.verts.min(0))) if mesh is not None and len(mesh.verts) else 1.0
+    epsilon = float(report.get("config", {}).get("bsp", {}).get("epsilon", 1e-6))
+    return tie_tolerance(epsilon, None if decimals is None else int(decimals), size or 1.0)
 
 
-def _simplify_section(report: dict) -> str:
-    """What the simplify budget cost: the count against the target, the error, each kind of
-    defect with the share of the surface it covers, what was let go to reach the target, and the
-    parts with the largest error."""
-    st = next((x for x in report.get("stages", []) if x.get("name") == "simplify"), None)
-    d = (st or {}).get("details") or {}
-    if "defects" not in d:
-        return ""
-    acc = st.get("accuracy", {})
-    t_in = (st.get("counts_in") or {}).get("triangles", 0)
-    t_out = (st.get("counts_out") or {}).get("triangles", 0)
-    df = d["defects"]
-    rows = [("triangles", f"{t_in:,} → {t_out:,} (target {d.get('target_triangles', 0):,}; "
-                          f"defects = \"{df.get('policy', '')}\")")]
-    if "hausdorff_max" in acc:
-        rows.append(("error", f"max {acc['hausdorff_max']:.3%} of the diagonal, mean {acc['hausdorff_mean']:.3%}"
-                              + (f"; proven bound {acc['hausdorff_bound_original_to_simplified']:.3%} (original → "
-                                 "simplified)" if "hausdorff_bound_original_to_simplified" in acc else "")))
-    rows.append(("defects", f"{df['flipped_triangles']:,} flipped ({df['flipped_area']:.2%} of the area), "
-                            f"{df['new_nonmanifold_edges']:,} new non-manifold edges "
-                            f"({df['new_nonmanifold_area']:.2%}), {df['new_folds']:,} new folds "
-                            f"({df['folded_area']:.2%})"))
-    lay = d.get("layer")
-    if lay:
-        rows.append(("two-sided and repeated", f"{lay['with_back']:,} triangles had a back (simplified once, "
-                                               f"written twice); {lay['repeated_dropped']:,} repeats dropped"))
-    if d.get("relaxed"):
-        rows.append(("let go to reach the target", ", ".join(d["relaxed"])))
-    parts = d.get("parts") or {}
-    body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in rows)
-    out = f"<h2>Simplify: what the budget cost</h2><table>{body}</table>"
-    if parts.get("count", 0) > 1:
-        prow = "".join(
-            f"<tr><td class=n>{p['part']}</td><td class=n>{p['triangles_in']:,}</td><td class=n>"
-            f"{p['triangles_out']:,}</td><td class=n>{p['size']:.3f}</td><td class=n>{p['error']:.3%}</td>"
-            f"<td>{_esc(p['state'])}</td></tr>" for p in parts.get("worst", [])[:10])
-        out += (f"<p class=sub>{parts['count']:,} parts (pieces joined by edges of two triangles); "
-                f"{parts['dropped']:,} dropped, {parts['collapsed']:,} collapsed. The parts with the largest "
-                "error (size and error in fractions of the model's diagonal):</p>"
-                f"<table><tr><th>part</th><th>triangles in</th><th>out</th><th>size</th><th>error</th><th></th></tr>"
-                f"{prow}</table>")
+def _stage_sections(report: dict) -> list[str]:
+    """The sections the stages contribute (``StageSpec.report``: plain rows, rendered here), in
+    the order of the stages."""
+    out = []
+    by_name = {x.get("name"): x for x in report.get("stages", [])}
+    for spec in STAGES:
+        if spec.report is None or spec.name not in by_name:
+            continue
+        sec = spec.load_report()(by_name[spec.name])
+        if sec is None:
+            continue
+        body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in sec.rows)
+        html_ = f"<h2>{_esc(sec.title)}</h2><table>{body}</table>"
+        if sec.table:
+            num = sec.numeric + (False,) * (len(sec.head) - len(sec.numeric))
+            head = "".join(f"<th>{_esc(c)}</th>" for c in sec.head)
+            rows = "".join("<tr>" + "".join(f"<td class=n>{_esc(c)}</td>" if n else f"<td>{_esc(c)}</td>"
+                                            for c, n in zip(row, num)) + "</tr>" for row in sec.table)
+            html_ += f"<p class=sub>{_esc(sec.note)}</p><table><tr>{head}</tr>{rows}</table>"
+        out.append(html_)
     return out
 
 
@@ -368,7 +333,7 @@ def _lists_section(report: dict) -> str:
     for name, v in sorted(lists.items(), key=lambda kv: -kv[1]["bytes"]):
         frac = v["bytes"] / total
         rows.append(f"<tr><td>{_esc(name)}</td><td class=n>{v['items']:,}</td><td class=n>{v['stride'] or 'var'}"
-                    f"</td><td class=n>{_fmt_bytes(v['bytes'])}</td><td><div class='bar ok'><span style='width:"
+                    f"</td><td class=n>{fmt_bytes(v['bytes'])}</td><td><div class='bar ok'><span style='width:"
                     f"{frac * 100:.1f}%'></span></div></td><td class=sub>{_esc(v.get('doc', ''))}</td></tr>")
     return (f"<h2>Lists: where project.json's bytes go</h2><table><tr><th>list</th><th>items</th><th>stride</th>"
             f"<th>bytes</th><th style='width:20%'>share of list bytes</th><th>what</th></tr>{''.join(rows)}</table>")
@@ -504,14 +469,13 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     if lightmap is not None:
         lm_img = next(iter(lightmap["images"].values()))[..., :3].astype(np.float64) / 255.0
     mesh = preview.mesh_from_lists(lists, report, lightmap=lm_img)
-    tie = max(float(cfg.get("bsp", {}).get("epsilon", 1e-6)), 2.0 * 10.0 ** -int(cfg.get("export", {}).get(
-        "precision", 5)))  # the tree's epsilon, or the rounding of the written positions
+    tie = _tie(report, mesh)
     views = preview.render_views(mesh, width, height, tie, memo=memo) if mesh is not None and len(mesh.tris) else []
     sweeps = load_sweeps(out_dir)
     s = report.get("scene", {})
     title = Path(report.get("input", {}).get("path") or "bake").name
     pj = next((lim for lim in report.get("limits", []) if lim["name"].startswith("project.json")), None)
-    pj_line = (f" · project.json {_fmt_bytes(pj['value'])} of 5 MiB ({pj['value'] / pj['limit']:.1%})"
+    pj_line = (f" · project.json {fmt_bytes(pj['value'])} of 5 MiB ({pj['value'] / pj['limit']:.1%})"
                if pj else "")
     bad = [lim for lim in report.get("limits", []) if not lim["ok"]]
     head = (f"<h1>{_esc(title)}</h1><p class=sub>scratch-bake {_esc(report.get('tool', {}).get('version', ''))} · "
@@ -527,7 +491,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
                f"{json_name} was not written (export.json = false)" if not has_json else
                "the bake wrote no vertex and triangle lists")
         body.append(f"<h2>Previews</h2><p class=sub>No previews: {_esc(why)}.</p>")
-    body += [_textures_section(textures), _stages_section(report), _simplify_section(report), _bsp_section(report),
+    body += [_textures_section(textures), _stages_section(report), *_stage_sections(report),
              _lists_section(report),
              _sweeps_section(sweeps, report)]
     page = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>Bake report: {_esc(title)}</title>"

@@ -18,93 +18,16 @@ the few microseconds of the commit, each file is still complete, old or new.)
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import json
 import os
-import signal
-import tempfile
-import threading
 from pathlib import Path
-from typing import Iterator
 
 from ..errors import BakeError, ConfigError
+from ..files import TMP_SUFFIX, remove_orphan_temps, same_bytes, signals_held, stage_temp, unlink_quietly
 
 MANIFEST = ".bake-manifest.json"
-
-
-TMP_SUFFIX = ".bake-tmp"
 COMMITTED: list[Path] = []  # output folders whose commit finished in this process (for messages)
-
-
-def _same_bytes(path: Path, data: bytes) -> bool:
-    try:
-        return path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data
-    except OSError:
-        return False
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _umask()  # read once, at import (setting it is process-wide)
-
-
-def _stage_temp(path: Path, data: bytes) -> Path:
-    """Write ``data`` next to ``path`` under a temporary name, flushed to disk. The file gets the
-    mode the target has, or a new file's usual mode (0o666 minus the umask) -- not mkstemp's 0o600,
-    which the rename would otherwise hand on to the output."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        mode = path.stat().st_mode & 0o7777
-    except OSError:
-        mode = 0o666 & ~_UMASK
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=TMP_SUFFIX, dir=path.parent)
-    try:
-        try:
-            os.fchmod(fd, mode)
-        except OSError:  # a file system without modes keeps what it has
-            pass
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-    except BaseException:
-        _unlink(Path(tmp))
-        raise
-    return Path(tmp)
-
-
-def _unlink(p: Path) -> None:
-    try:
-        p.unlink()
-    except OSError:
-        pass
-
-
-def write_atomic(path: Path, data: bytes) -> bool:
-    """Write ``data`` to ``path`` atomically. Returns False if the file already had these bytes."""
-    if _same_bytes(path, data):
-        return False
-    tmp = _stage_temp(path, data)
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        _unlink(tmp)
-        raise
-    return True
-
-
-def remove_orphan_temps(out_dir: Path) -> int:
-    """Temporary files left by a bake that was killed mid-write."""
-    n = 0
-    for p in Path(out_dir).rglob(f".*{TMP_SUFFIX}"):
-        _unlink(p)
-        n += 1
-    return n
 
 
 def _safe_join(root: Path, rel: str) -> Path:
@@ -112,31 +35,6 @@ def _safe_join(root: Path, rel: str) -> Path:
     if root.resolve() not in p.parents and p != root.resolve():
         raise BakeError(f"refusing to write outside the output folder: {rel}")
     return p
-
-
-# --------------------------------------------------------------------------- signals
-HELD_SIGNALS = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s)
-
-
-@contextlib.contextmanager
-def signals_held() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP until the block is done, then deliver the first one that
-    came (Python runs signal handlers in the main thread whichever thread the kernel picked, so
-    replacing the handlers holds them all). Off the main thread: no change."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    got: list[int] = []
-    old = {}
-    try:
-        for s in HELD_SIGNALS:
-            old[s] = signal.signal(s, lambda n, _f: got.append(n))
-        yield
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        if got:
-            signal.raise_signal(got[0])
 
 
 # --------------------------------------------------------------------------- output errors
@@ -230,7 +128,7 @@ class Outputs:
         self.check([rel])
         target = _safe_join(self.out_dir, rel)
         self._rels.add(rel)
-        if _same_bytes(target, data):
+        if same_bytes(target, data):
             if always:
                 self._touch.append(target)
             self.status[rel] = "unchanged"
@@ -246,13 +144,13 @@ class Outputs:
             raise ConfigError("refusing to overwrite an input file with the depfile", path=path)
         if path.is_dir():
             raise ConfigError("--depfile names a folder, not a file", path=path)
-        if not _same_bytes(path, data):
+        if not same_bytes(path, data):
             self._stage(path, data)
 
     def _stage(self, target: Path, data: bytes) -> None:
         self._attempted.append(target)  # before the temporary exists: abort() finds it by name
         try:
-            self._staged.append((_stage_temp(target, data), target))
+            self._staged.append((stage_temp(target, data), target))
         except OSError as e:
             raise output_error(e, target) from None
 
@@ -271,7 +169,7 @@ class Outputs:
                 stale.append((rel, p))
         manifest = json.dumps({"files": sorted(self._rels | set(self.keep))}, indent=1).encode()
         man = self.out_dir / MANIFEST
-        if not _same_bytes(man, manifest):
+        if not same_bytes(man, manifest):
             self._stage(man, manifest)
         with signals_held():
             where = self.out_dir
@@ -313,11 +211,11 @@ class Outputs:
         being recorded (found by its target's name pattern)."""
         for tmp, _ in self._staged:
             if tmp.exists():
-                _unlink(tmp)
+                unlink_quietly(tmp)
         for target in self._attempted:
             try:
                 for tmp in target.parent.glob(f".{glob.escape(target.name)}.*{TMP_SUFFIX}"):
-                    _unlink(tmp)
+                    unlink_quietly(tmp)
             except OSError:
                 pass
         self._staged = []

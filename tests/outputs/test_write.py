@@ -5,7 +5,8 @@ import os
 import pytest
 
 from bake.errors import BakeError, ConfigError
-from bake.export.write import depfile_text, write_atomic, write_outputs
+from bake.files import write_atomic
+from bake.outputs.write import depfile_text, write_outputs
 
 
 def test_unchanged_bytes_keep_timestamp(tmp_path):
@@ -69,8 +70,8 @@ def test_orphan_temps_from_a_killed_bake_are_removed(tmp_path):
 
 def test_a_failure_in_phase_one_changes_nothing(tmp_path, monkeypatch):
     write_outputs(tmp_path, {"a.txt": b"old a", "b.txt": b"old b"})
-    import bake.export.write as w
-    real = w._stage_temp
+    import bake.outputs.write as w
+    real = w.stage_temp
     calls = []
 
     def flaky(path, data):
@@ -78,7 +79,7 @@ def test_a_failure_in_phase_one_changes_nothing(tmp_path, monkeypatch):
         if path.name == "b.txt":
             raise OSError("disk full")
         return real(path, data)
-    monkeypatch.setattr(w, "_stage_temp", flaky)
+    monkeypatch.setattr(w, "stage_temp", flaky)
     with pytest.raises(ConfigError, match=r"b\.txt: cannot write: disk full"):  # exit 2, the path named
         write_outputs(tmp_path, {"a.txt": b"new a", "b.txt": b"new b"})
     assert (tmp_path / "a.txt").read_bytes() == b"old a" and (tmp_path / "b.txt").read_bytes() == b"old b"

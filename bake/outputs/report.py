@@ -28,7 +28,7 @@ from typing import Any
 from .. import __version__
 from ..config import to_dict
 from ..pipeline import BakeResult, counts
-from ..scratch.limits import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_BASE_BYTES, PROJECT_JSON_LIMIT
+from ..scratch.limits import ASSET_LIMIT, LIST_ITEM_LIMIT, PROJECT_BASE_BYTES, PROJECT_JSON_LIMIT, fmt_bytes
 
 REPORT_VERSION = 1
 
@@ -119,14 +119,6 @@ def cache_note(stage: dict[str, Any]) -> str:
 
 def to_json(report: dict[str, Any]) -> bytes:
     return (json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False) + "\n").encode("utf-8")
-
-
-def _fmt_bytes(n: int) -> str:
-    if n >= 1024 * 1024:
-        return f"{n / 1024 / 1024:.2f} MiB"
-    if n >= 1024:
-        return f"{n / 1024:.1f} KiB"
-    return f"{n} B"
 
 
 def _limit_pct(lim: dict) -> str:
@@ -274,9 +266,9 @@ def summary_lines(report: dict[str, Any], command_seconds: float | None = None) 
             lines.append(f"    {'PROBLEM' if w in problems else 'warning'}: {w}")
     total = sum(v["bytes"] for v in report["lists"].values())
     pk = _export_details(report).get("pack")
-    packed = f" (packed from {_fmt_bytes(total - pk['packed_bytes'] + pk['plain_bytes'])})" if pk else ""
+    packed = f" (packed from {fmt_bytes(total - pk['packed_bytes'] + pk['plain_bytes'])})" if pk else ""
     lines.append(f"  lists: {len(report['lists'])}, {sum(v['items'] for v in report['lists'].values())} items, "
-                 f"{_fmt_bytes(total)} in project.json{packed}")
+                 f"{fmt_bytes(total)} in project.json{packed}")
     for lim in report["limits"]:
         if not lim["ok"]:
             lines.append(f"  LIMIT EXCEEDED: {lim['name']} = {lim['value']} > {lim['limit']}")
@@ -288,6 +280,6 @@ def summary_lines(report: dict[str, Any], command_seconds: float | None = None) 
         ex = _export_details(report)
         into, own = ex.get("into") or {}, ex.get("sb3_project_json_bytes")
         merged = f" in {into['file']} (the bake merged into {Path(into['project']).name})" if into.get("file") else ""
-        lines.append(f"  project.json: {_fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])}){merged}"
-                     + (f"; the bake's own .sb3: {_fmt_bytes(own)}" if merged and own is not None else ""))
+        lines.append(f"  project.json: {fmt_bytes(pj[0]['value'])} of 5 MiB ({_limit_pct(pj[0])}){merged}"
+                     + (f"; the bake's own .sb3: {fmt_bytes(own)}" if merged and own is not None else ""))
     return lines

@@ -7,9 +7,9 @@ from __future__ import annotations
 import base64
 import io
 import json
-import os
 import shutil
 import subprocess
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -19,8 +19,8 @@ from PIL import Image
 
 from bake import cli
 from bake import config as config_mod
-from bake.export import html as html_mod
-from bake.export import preview
+from bake.outputs import html as html_mod
+from bake.outputs import preview
 
 COLORS = {"floor": (0.8, 0.8, 0.75), "red": (0.9, 0.1, 0.1), "blue": (0.1, 0.2, 0.9), "magenta": (1.0, 0.0, 1.0)}
 
@@ -166,7 +166,7 @@ def test_stage_table_counts_faces_and_reads_distances_as_percent(baked):
     # terminal's "inflation=1.07" read like 7% for +107%)
     assert html_mod._fmt_accuracy("inflation", 0.5) == "+50.0% triangles"
     assert html_mod._fmt_accuracy("splits", 0.5) == "0.5"
-    from bake.export import report as report_mod
+    from bake.outputs import report as report_mod
 
     rep = {"scene": {"triangles": 5602, "vertices": 10, "materials": 1}, "input": {"path": "house.obj"},
            "seconds": 1.0, "lists": {}, "limits": [], "stages": [{"name": "bsp", "seconds": 0.5, "warnings": [],
@@ -289,18 +289,12 @@ def test_textures_are_decoded_back_from_every_encoding(tmp_path):
 
 # --------------------------------------------------------------------------- headless Chromium
 def _chromium() -> str | None:
-    found = shutil.which("chromium") or shutil.which("chromium-browser")
-    if found or os.environ.get("BAKE_TEST_INSTALL_CHROMIUM", "1") == "0":
-        return found
-    if hasattr(os, "geteuid") and os.geteuid() == 0 and shutil.which("apt-get"):
-        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-        try:  # Debian's chromium package, as the issue asks; a failure leaves the parse-only checks
-            subprocess.run(["apt-get", "update", "-qq"], env=env, capture_output=True, timeout=300)
-            subprocess.run(["apt-get", "install", "-y", "-qq", "chromium"], env=env, capture_output=True,
-                           timeout=900)
-        except (OSError, subprocess.TimeoutExpired):
-            return None
-    return shutil.which("chromium")
+    """The chromium the player tests use (vm/turbowarp.py: on PATH or $CHROMIUM, else Debian's,
+    installed as `make test` does)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "vm"))
+    import turbowarp
+
+    return turbowarp.chromium()
 
 
 def screenshot(page: Path, png: Path, width: int = 1200, height: int = 2000) -> bool:

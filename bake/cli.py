@@ -330,6 +330,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_keys(args: argparse.Namespace) -> int:
+    from . import stages  # noqa: F401  (the registry hands the loader the sections stages bring)
+
     # arrays of tables list their fields too: lighting.lights[].kind = "sun", ...
     for key, val in config_mod.key_defaults():
         print(f"{key} = {json.dumps(val)}")

@@ -463,6 +463,16 @@ class Config:
     # Every key set explicitly, and where: "file" (the config) or the --set assignment that set it.
     given: dict[str, str] = field(default_factory=dict, metadata={"internal": True})
 
+    def __getattr__(self, name: str) -> Any:
+        """A section a stage brings (:func:`stage_sections`), with its defaults until set."""
+        if not name.startswith("__"):
+            cls = stage_sections().get(name)
+            if cls is not None:
+                section = cls()
+                object.__setattr__(self, name, section)
+                return section
+        raise AttributeError(name)
+
 
 @dataclass(frozen=True)
 class ImportJob:
@@ -484,13 +494,47 @@ def _toml_name(attr: str) -> str:
     return _REVERSE.get(attr, attr)
 
 
-def _fields(cls: type) -> dict[str, dataclasses.Field]:
-    return {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
+# The sections stages bring themselves (``StageSpec.config``), table name -> dataclass: set by the
+# registry (``bake.stages``) whenever its table changes. They are read, checked, listed (``bake
+# keys``) and reported like the built-in ones. (The registry tells the loader, not the other way
+# round: the registry leads to every stage, and every stage reads its section from here.)
+_STAGE_SECTIONS: dict[str, type] = {}
+# and the range checks the stages hold for their sections (``StageSpec.check``), run by
+# :func:`validate` after its own, whether the stage will run or not
+_STAGE_CHECKS: list[Any] = []
+
+
+def use_stage_sections(sections: dict[str, type], checks: Any = None) -> None:
+    """Called by the registry with the sections of its stages and a function that runs their
+    range checks on a config."""
+    clash = set(sections) & {f.name for f in dataclasses.fields(Config)}
+    if clash:
+        raise ValueError(f"a stage's section takes the name of a built-in one: {sorted(clash)}")
+    _STAGE_SECTIONS.clear()
+    _STAGE_SECTIONS.update(sections)
+    _STAGE_CHECKS[:] = [checks] if checks is not None else []
+
+
+def stage_sections() -> dict[str, type]:
+    return dict(_STAGE_SECTIONS)
+
+
+def _fields(cls: type) -> list[str]:
+    """The attribute names of a section's keys, in order (the config's own sections, then those
+    the stages bring)."""
+    names = [f.name for f in dataclasses.fields(cls) if not f.metadata.get("internal")]
+    return names + [n for n in stage_sections() if n not in names] if cls is Config else names
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    """The type of each attribute of a section (with the stages' sections for the config)."""
+    hints = get_type_hints(cls)
+    return {**stage_sections(), **hints} if cls is Config else hints
 
 
 def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
     """Every dotted key the config accepts (for suggestions and docs)."""
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     out = []
     for name in _fields(cls):
         key = prefix + _toml_name(name)
@@ -513,7 +557,7 @@ _SYNONYMS = {"occlusion": "ao", "ambient_occlusion": "ao", "ambientocclusion": "
 
 def _children(cls: Any) -> dict[str, Any]:
     """TOML name -> type of each key of a section (list[Section] as Section)."""
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     out = {}
     for name in _fields(cls):
         t = hints[name]
@@ -777,7 +821,7 @@ def _leaves(value: dict, prefix: str) -> list[str]:
 
 def _build(cls: type, data: dict, prefix: str, where: _Where, base: Any = None) -> Any:
     fields = _fields(cls)
-    hints = get_type_hints(cls)
+    hints = _hints(cls)
     obj = base if base is not None else cls()
     for raw_key, value in data.items():
         attr = _ALIASES.get(raw_key, raw_key)
@@ -917,7 +961,7 @@ def error_at(cfg: Config, key: str, msg: str) -> ConfigError:
 
 def _element_class(obj: Any, attr: str, key: str) -> type:
     """The dataclass of the elements of the list field ``attr`` (e.g. LightConfig)."""
-    t = get_type_hints(type(obj)).get(attr) if dataclasses.is_dataclass(obj) else None
+    t = _hints(type(obj)).get(attr) if dataclasses.is_dataclass(obj) else None
     args = get_args(t) if t is not None and get_origin(t) in (list, typing.List) else ()
     if not args or not dataclasses.is_dataclass(args[0]):
         raise ConfigError("unknown key" + _suggest(key, all_keys()), key=key)
@@ -956,7 +1000,7 @@ def key_defaults() -> list[tuple[str, Any]]:
         out.append((key, to_dict(val)))
         *path, last = key.split(".")
         owner = get_key(cfg, ".".join(path)) if path else cfg
-        t = get_type_hints(type(owner)).get(_ALIASES.get(last, last))
+        t = _hints(type(owner)).get(_ALIASES.get(last, last))
         args = get_args(t) if get_origin(t) in (list, typing.List) else ()
         if args and dataclasses.is_dataclass(args[0]):
             elem = args[0]()
@@ -990,10 +1034,22 @@ RESERVED_OUTPUT_NAMES = ("report.json", "report.md", "report.html", "report-live
 
 
 def validate(cfg: Config) -> None:
-    """Range checks that types alone cannot express."""
+    """Range checks that types alone cannot express: the config's own, then the stages' (an error
+    placed where its value came from)."""
     def need(cond: bool, key: str, msg: str) -> None:
         if not cond:
             raise error_at(cfg, key, msg)
+
+    _validate_own(cfg, need)
+    for check in _STAGE_CHECKS:
+        try:
+            check(cfg)
+        except ConfigError as e:
+            raise (e if e.path is not None or e.origin is not None or e.key is None
+                   else error_at(cfg, e.key, e.message)) from None
+
+
+def _validate_own(cfg: Config, need: Any) -> None:
 
     need(cfg.import_.scene >= -1, "import.scene", "must be a scene number >= 0, or -1 for the file's default scene")
     need(cfg.transform.scale > 0, "transform.scale", "must be > 0")
@@ -1074,7 +1130,7 @@ def numeric_keys() -> list[str]:
     out = []
 
     def walk(cls: type, prefix: str) -> None:
-        hints = get_type_hints(cls)
+        hints = _hints(cls)
         for name in _fields(cls):
             t = hints[name]
             key = prefix + _toml_name(name)

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Collection
 
-import numpy as np
 
 from . import stages as registry
 from . import progress as progress_mod
@@ -22,8 +21,8 @@ from . import config as config_mod
 from .config import Config
 from .errors import BakeError, ConfigError, InputError, StageError
 from .record import StageRecord
-from .stages import STAGES, StageSpec, stages_for
-from .scene import MAX_COORDINATE, MIN_EXTENT, Scene
+from .stages import StageSpec, stages_for
+from .scene import Scene
 from .scratch.numbers import position_decimals
 
 
@@ -31,7 +30,7 @@ def unused_settings(cfg: Config, ran: Collection[str], idle: dict[str, str] | No
     """One line per key the author set (in the config or with --set) in a section whose stage
     does not run: it changes nothing, and the line names the switch that would run it, or, for a
     stage that found nothing to do (``idle``: stage name -> why), why."""
-    switch = {spec.name: spec.switch for spec in STAGES}
+    switch = {spec.name: spec.switch for spec in registry.STAGES}
     unused: dict[str, list[str]] = {}
     for key, where in cfg.given.items():
         stages = stages_for(key)
@@ -47,12 +46,13 @@ def unused_settings(cfg: Config, ran: Collection[str], idle: dict[str, str] | No
 
 
 def with_grid(scene: Scene, cfg: Config) -> Scene:
-    """The scene with the grid its positions will be written on (``export.precision`` of the
-    scene's size), fixed once, before the first stage that is ``on_grid`` runs. Stages read it from the
-    scene, never from the export section."""
-    if scene.position_decimals is not None or not cfg.export.enabled:
+    """The scene with the grid its positions will be written on (the registry's
+    :func:`~bake.stages.written_precision` of the scene's size), fixed once, before the first
+    stage that is ``on_grid`` runs. Stages read it from the scene, never from another's section."""
+    precision = registry.written_precision(cfg)
+    if scene.position_decimals is not None or precision is None:
         return scene
-    return scene.replace(position_decimals=position_decimals(scene.scale(), cfg.export.precision))
+    return scene.replace(position_decimals=position_decimals(scene.scale(), precision))
 
 
 def stage_count(cfg: Config) -> int:
@@ -63,7 +63,7 @@ def stage_count(cfg: Config) -> int:
 def plan(cfg: Config) -> list[tuple[StageSpec, bool, str]]:
     """Each stage with whether it runs and why (or why not)."""
     out = []
-    for spec in STAGES:
+    for spec in registry.STAGES:
         value = spec.enabled(cfg)
         on = bool(value)
         if spec.switch is None:
@@ -140,7 +140,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     limit = next((i for i, spec in enumerate(active) if spec.name in recompute), len(active))
     session = cache.session() if cache is not None else None
     memo = cache_mod.Memo(cache.store) if cache is not None else None
-    sections = [spec.section(cfg) for spec in active]
+    sections = [spec.section_of(cfg) for spec in active]
     info: dict[str, Any] | None = None
     start, prev_key, covered = 0, None, frozenset()
     pending: list[str] = []  # cache warnings for the next record
@@ -198,8 +198,6 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
             raise InputError(f"has no triangles left to bake after {spec.name}: every face is degenerate "
                              "(repeated corners, or an area under mesh.clean.area_tolerance)"
                              + (f" ({why})" if why else ""), path=scene.source.path)
-        if spec.checks_coordinates:
-            check_coordinates(scene, spec.name, cfg)
         if not rec.counts_in:
             rec.counts_in = counts_in
         if not rec.counts_out:
@@ -275,17 +273,12 @@ def _from_cache(rec: StageRecord, seconds: float) -> StageRecord:
 
 
 def check_sections(cfg: Config) -> None:
-    """The range checks the stages hold for their sections, run before the bake whether the stage
-    runs or not (a bad value under a switch that is off would otherwise wait, unsaid, for the day
-    the switch is turned on)."""
-    for spec in STAGES:
-        check = spec.load_check()
-        if check is None:
-            continue
-        try:
-            check(spec.section(cfg))
-        except ConfigError as e:
-            raise _in_config_file(e, cfg) from None
+    """The stages' range checks (:func:`bake.stages.check_all`) before the bake, for a config
+    made in code as for one loaded (the loader ran them already)."""
+    try:
+        registry.check_all(cfg)
+    except ConfigError as e:
+        raise _in_config_file(e, cfg) from None
 
 
 def _advise(spec: StageSpec, cfg: Config, scene: Scene, rec: StageRecord, records: list[StageRecord]) -> None:
@@ -301,7 +294,7 @@ def run_stage(name: str, scene: Scene, cfg: Config) -> tuple[Scene, StageRecord]
     spec = registry.spec(name)
     if spec.on_grid:
         scene = with_grid(scene, cfg)
-    return spec.load()(scene, spec.section(cfg))
+    return spec.load()(scene, spec.section_of(cfg))
 
 
 def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:
@@ -310,30 +303,6 @@ def _in_config_file(e: ConfigError, cfg: Config) -> ConfigError:
     if e.path is not None or e.key is None:
         return e
     return config_mod.error_at(cfg, e.key, e.message)
-
-
-def check_coordinates(scene: Scene, stage: str, cfg: Config) -> None:
-    """The used vertices must lie within +-MAX_COORDINATE and span at least MIN_EXTENT (or be one
-    point). The importers name the lines of coordinates that are too large; what is left is a model
-    too small to bake (after import) or a transform that scales it out of range (the key is named)."""
-    used = scene.used_vertex_mask()
-    if not used.any():
-        return
-    p = scene.positions[used]
-    with np.errstate(over="ignore"):
-        big = float(np.abs(p).max())
-        extent = float(np.abs(p.max(axis=0) - p.min(axis=0)).max())
-    small = 0.0 < extent < MIN_EXTENT
-    if big <= MAX_COORDINATE and np.isfinite(big) and not small:
-        return
-    what = (f"the model is only {extent:.3g} across (bake needs at least {MIN_EXTENT:g})" if small else
-            f"coordinates reach {big:.3g}, beyond +-{MAX_COORDINATE:g} (the range bake supports)")
-    if stage == "transform":
-        t = cfg.transform
-        key = "transform.fit" if t.fit > 0 else "transform.scale"
-        raise ConfigError(f"{what} after the transform ({key} = {t.fit if t.fit > 0 else t.scale:g})",
-                          path=cfg.source, key=key)
-    raise InputError(what, path=scene.source.path)
 
 
 def counts(scene: Scene) -> dict[str, int]:

@@ -282,3 +282,23 @@ def make_scene(positions: Any, triangles: Any = None, *, polygons: list[list[int
                  poly_material=tm.copy(), poly_uvs=None if uv is None else uv.reshape(-1, 2).copy(),
                  triangles=tris, tri_material=tm, tri_uvs=uv, tri_polygon=np.arange(T, dtype=np.int64),
                  vertex_colors=vc, materials=mats)
+
+
+def coordinate_problem(scene: Scene) -> str | None:
+    """What is wrong with the used vertices' coordinates, or None: they must lie within
+    +-MAX_COORDINATE and span at least MIN_EXTENT (or be one point). The import and transform
+    stages check their results (the importers name the lines of coordinates that are too large
+    themselves; what is left is a model too small to bake, or a transform that scales it out of
+    range)."""
+    used = scene.used_vertex_mask()
+    if not used.any():
+        return None
+    p = scene.positions[used]
+    with np.errstate(over="ignore"):
+        big = float(np.abs(p).max())
+        extent = float(np.abs(p.max(axis=0) - p.min(axis=0)).max())
+    small = 0.0 < extent < MIN_EXTENT
+    if big <= MAX_COORDINATE and np.isfinite(big) and not small:
+        return None
+    return (f"the model is only {extent:.3g} across (bake needs at least {MIN_EXTENT:g})" if small else
+            f"coordinates reach {big:.3g}, beyond +-{MAX_COORDINATE:g} (the range bake supports)")

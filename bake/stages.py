@@ -7,20 +7,22 @@ know no stage by name:
 
 - ``entry``: the function, ``"module:function"`` (loaded when the stage runs, so a command that
   runs no stage imports none of their libraries; the layout test reads these as imports);
-- ``section`` and ``enabled``: its part of the config and whether it runs (``switch`` names the
-  key, for the report); ``keys``: the config key prefixes it reads (a sweep of such a key reruns
-  it and reports its seconds; a key set while it does not run is said to change nothing);
+- ``section`` and ``enabled``: its part of the config (a function of the config, or the name of
+  one) and whether it runs (``switch`` names the key, for the report); ``keys``: the config key
+  prefixes it reads (a sweep of such a key reruns it and reports its seconds; a key set while it
+  does not run is said to change nothing); ``config``: a section the stage brings itself, as
+  (TOML table name, dataclass): the loader reads and lists it (``bake keys``) like the built-in
+  ones (the registry tells the loader, :func:`add` and :func:`remove` too);
 - ``error``: the figure of its record a sweep plots as the error (others use the image error);
 - ``check``: the range check of its section, run before every bake whether the stage runs or not;
 - ``advice``: what to tell the author after it ran (it may read the records before it);
 - ``report``: its own section of report.html (``section(stage entry of report.json) ->
   ReportSection``);
 - ``on_grid``: it builds on the positions as the export will write them (the grid is fixed once,
-  before the first such stage); ``checks_coordinates``: the model's range is checked after it;
-  ``leaves``: what it must leave for the bake to go on ("faces": an import without any is an
+  before the first such stage); ``leaves``: what it must leave for the bake to go on ("faces": an import without any is an
   input error; "triangles": likewise after triangulation and cleaning).
 
-Adding a stage is its package and one entry below.
+Adding a stage is its package and one entry below (or, at run time, :func:`add`).
 """
 
 from __future__ import annotations
@@ -28,15 +30,19 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable
 
-from .config import Config, ImportJob
+from . import config as config_mod
+from .config import Config
 from .record import StageRecord
 from .scene import Scene
 
 
-def _load(target: str) -> Any:
+def _load(target: str | Callable) -> Any:
+    """A function named ``"module:function"`` (imported when first needed), or the function itself
+    (a stage added at run time)."""
+    if callable(target):
+        return target
     mod_name, fn = target.split(":")
     return getattr(importlib.import_module(mod_name), fn)
 
@@ -48,18 +54,22 @@ def _always(_: Config) -> bool:
 @dataclass(frozen=True)
 class StageSpec:
     name: str
-    entry: str  # "module:function"
-    section: Callable[[Config], Any]
+    entry: str | Callable  # "module:function" (or the function, for a stage added at run time)
+    section: Callable[[Config], Any] | str  # or "module:function"
     enabled: Callable[[Config], Any] = _always
     switch: str | None = None  # the key that turns it on/off, for the report
     keys: tuple[str, ...] = ()
     error: tuple[str, str] | None = None  # (record key, label)
-    check: str | None = None  # "module:function"(section)
-    advice: str | None = None  # "module:function"(cfg, scene, record, records before)
-    report: str | None = None  # "module:function"(stage entry of report.json) -> ReportSection | None
+    check: str | Callable | None = None  # "module:function"(section)
+    advice: str | Callable | None = None  # "module:function"(cfg, scene, record, records before)
+    report: str | Callable | None = None  # "module:function"(stage entry of report.json) -> ReportSection | None
     on_grid: bool = False
-    checks_coordinates: bool = False
     leaves: str | None = None  # "faces" | "triangles"
+    config: tuple[str, type] | None = None  # (TOML table, dataclass) of a section the stage brings
+
+    def section_of(self, cfg: Config) -> Any:
+        """The stage's part of ``cfg`` (what its entry point is called with)."""
+        return (_load(self.section) if isinstance(self.section, str) else self.section)(cfg)
 
     def load(self) -> Callable[[Scene, Any], tuple[Scene, StageRecord]]:
         return _load(self.entry)
@@ -78,13 +88,6 @@ class StageSpec:
         return any(key.startswith(prefix) for prefix in self.keys)
 
 
-def _import_job(cfg: Config) -> ImportJob:
-    p = Path(cfg.input.path)
-    if not p.is_absolute():
-        p = cfg.base_dir / p
-    return ImportJob(path=p, format=cfg.input.format, strict=cfg.import_.strict, scene=cfg.import_.scene)
-
-
 def _textures_section(cfg: Config):
     """The textures section, told whether the lighting stage will bake into its lightmap atlas."""
     lit = cfg.lighting.enabled and cfg.lighting.target == "lightmap"
@@ -92,10 +95,9 @@ def _textures_section(cfg: Config):
 
 
 STAGES: tuple[StageSpec, ...] = (
-    StageSpec("import", "bake.importers.stage:stage", _import_job, keys=("import.",),
-              advice="bake.advice:unused_textures", checks_coordinates=True, leaves="faces"),
-    StageSpec("transform", "bake.mesh.transform:stage", lambda c: c.transform, keys=("transform.",),
-              checks_coordinates=True),
+    StageSpec("import", "bake.importers.stage:stage", "bake.importers.stage:job", keys=("import.",),
+              advice="bake.advice:unused_textures", leaves="faces"),
+    StageSpec("transform", "bake.mesh.transform:stage", lambda c: c.transform, keys=("transform.",)),
     StageSpec("triangulate", "bake.mesh.triangulate:stage", lambda c: c.mesh.triangulate,
               keys=("mesh.triangulate.",), leaves="triangles"),
     StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean, lambda c: c.mesh.clean.enabled,
@@ -123,6 +125,12 @@ STAGES: tuple[StageSpec, ...] = (
 )
 
 
+def written_precision(cfg: Config) -> int | None:
+    """The significant digits positions are written with (``export.precision``; docs/formats.md
+    "Numbers"), or None when nothing is written: the grid the ``on_grid`` stages build on."""
+    return cfg.export.precision if cfg.export.enabled else None
+
+
 def names() -> list[str]:
     return [s.name for s in STAGES]
 
@@ -137,3 +145,40 @@ def spec(name: str) -> StageSpec:
 def stages_for(key: str) -> tuple[str, ...]:
     """The stages that read a config key, in the order they run."""
     return tuple(s.name for s in STAGES if s.reads(key))
+
+
+def check_all(cfg: Config) -> None:
+    """Every stage's range check of its section (``StageSpec.check``), whether the stage runs or
+    not (a bad value under a switch that is off would otherwise wait, unsaid, for the day the
+    switch is turned on). The loader runs it (:func:`bake.config.validate`); so does the runner,
+    for a config made in code."""
+    for s in STAGES:
+        check = s.load_check()
+        if check is not None:
+            check(s.section_of(cfg))
+
+
+def _publish(table: tuple[StageSpec, ...]) -> None:
+    """Make ``table`` the registry, telling the loader the sections its stages bring and how to
+    check them (refused, with the registry unchanged, when one takes a built-in section's name)."""
+    global STAGES
+    config_mod.use_stage_sections({s.config[0]: s.config[1] for s in table if s.config is not None}, check_all)
+    STAGES = table
+
+
+def add(new: StageSpec, *, after: str) -> None:
+    """Put a stage into the table after the stage ``after`` (a plug-in, or a test's example
+    stage); its section, if it brings one, becomes part of every config loaded from now on."""
+    if new.name in names():
+        raise ValueError(f"there is a stage '{new.name}' already")
+    i = names().index(after) + 1
+    _publish(STAGES[:i] + (new,) + STAGES[i:])
+
+
+def remove(name: str) -> None:
+    """Take a stage added with :func:`add` out of the table again."""
+    spec(name)
+    _publish(tuple(s for s in STAGES if s.name != name))
+
+
+_publish(STAGES)

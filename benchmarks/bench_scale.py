@@ -102,7 +102,7 @@ base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 print(f"    {spec.name:<12} running on {scene.n_triangles or scene.n_polygons} faces ...", file=sys.stderr, flush=True)
 tracemalloc.start()
 t = time.perf_counter()
-scene, rec = spec.load()(scene, spec.section(cfg))
+scene, rec = spec.load()(scene, spec.section_of(cfg))
 seconds = time.perf_counter() - t
 traced = tracemalloc.get_traced_memory()[1]
 tracemalloc.stop()

@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
-from ..config import ImportJob
+from pathlib import Path
+
+from ..config import Config, ImportJob
 from ..errors import InputError
 from ..record import StageRecord
-from ..scene import Scene
+from ..scene import Scene, coordinate_problem
 
 FORMATS = {".obj": "obj", ".gltf": "gltf", ".glb": "glb"}
+
+
+def job(cfg: Config) -> ImportJob:
+    """The stage's section: the model's path (relative to the config's folder) and how to read it."""
+    p = Path(cfg.input.path)
+    if not p.is_absolute():
+        p = cfg.base_dir / p
+    return ImportJob(path=p, format=cfg.input.format, strict=cfg.import_.strict, scene=cfg.import_.scene)
 
 
 def detect_format(job: ImportJob) -> str:
@@ -31,4 +41,8 @@ def stage(_: Scene, job: ImportJob) -> tuple[Scene, StageRecord]:
         from .obj import load
     else:
         from .gltf import load
-    return load(job)
+    scene, rec = load(job)
+    problem = coordinate_problem(scene)
+    if problem is not None:
+        raise InputError(problem, path=scene.source.path)
+    return scene, rec

@@ -60,7 +60,7 @@ import numpy as np
 from ..config import TransformConfig
 from ..errors import ConfigError
 from ..record import StageRecord
-from ..scene import Light, Scene
+from ..scene import Light, Scene, coordinate_problem
 
 # Rotation taking the source up axis to +y (rows: output axes).
 UP_ROTATIONS: dict[str, np.ndarray] = {
@@ -214,6 +214,11 @@ def stage(scene: Scene, cfg: TransformConfig) -> tuple[Scene, StageRecord]:
         "bounds_after": map_bounds(before, A, t).tolist(),
         "lights_transformed": len(scene.lights),
     }
+    problem = coordinate_problem(out)
+    if problem is not None:
+        key = "transform.fit" if cfg.fit > 0 else "transform.scale"
+        raise ConfigError(f"{problem} after the transform ({key} = {cfg.fit if cfg.fit > 0 else cfg.scale:g})",
+                          key=key)
     rec.seconds = time.perf_counter() - t0
     return out, rec
 

@@ -30,7 +30,7 @@ from ..errors import InputError
 from ..scratch.limits import fmt_bytes
 from .report import cache_note, fmt_unit
 from ..files import write_atomic
-from ..stages import STAGES
+from .. import stages as registry
 
 HTML_NAME = "report.html"
 SWEEP_DIR = "sweeps"
@@ -308,7 +308,7 @@ def _stage_sections(report: dict) -> list[str]:
     the order of the stages."""
     out = []
     by_name = {x.get("name"): x for x in report.get("stages", [])}
-    for spec in STAGES:
+    for spec in registry.STAGES:
         if spec.report is None or spec.name not in by_name:
             continue
         sec = spec.load_report()(by_name[spec.name])

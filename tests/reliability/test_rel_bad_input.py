@@ -440,7 +440,8 @@ def test_transform_out_of_range_names_the_key(tmp_path, capsys, key, value):
     cfg = tmp_path / "c.toml"
     cfg.write_text(f'[input]\npath = "m.obj"\n[transform]\n{key.split(".")[1]} = {value}\n')
     code, _, err = bake(capsys, cfg, tmp_path / "out")
-    assert_clean_error(code, err, status=2, file="c.toml", place=rf"c\.toml: key '{key}'")
+    # the line of the key in the config too (line 4: the key under [transform])
+    assert_clean_error(code, err, status=2, file="c.toml", place=rf"c\.toml:4: key '{key}'")
 
 
 # =========================================================================== config

@@ -31,7 +31,7 @@ from ..config import ExportConfig
 from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
-from ..scratch.numbers import decimals_for, position_decimals, project_json_bytes, round_positions
+from ..scratch.numbers import decimals_for, position_decimals, round_positions
 
 # An item with one of these is split by Scratch's import of a .txt file (scratch-gui
 # src/lib/import-csv.js: a .txt whose first, middle and last lines split into the same number of

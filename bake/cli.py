@@ -208,7 +208,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         sizes = {str(int(k)): int(v) for k, v in zip(u, c)}
     b = scene.bounds()
     exported, _ = pipeline.run_stage("export", scene, cfg)
-    info = exported.artefacts["list_info"]
+    info = exported.artefacts.list_info
     data = {
         "file": str(scene.source.path),
         "format": scene.source.format,

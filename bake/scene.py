@@ -108,6 +108,32 @@ class SourceInfo:
 
 
 @dataclass(frozen=True)
+class Artefacts:
+    """What a stage hands to later stages and to what runs after the bake, one field each (None
+    until the stage that makes it ran). A stage reads the fields of the stages before it, never
+    their sections."""
+
+    # textures: the model's textures (a ``bake.textures.stage.TextureSet``), the albedo lighting
+    # samples (a function of the scene: per-triangle RGBA), what the encodings wrote (lists,
+    # images), the costumes for the project ((name, PNG bytes), also written to assets/), and
+    # the lightmap atlas to bake into (``bake.textures.lightmap.LightmapJob``)
+    textures: Any = None
+    albedo: Any = None
+    texture_outputs: dict[str, Any] | None = None
+    costumes: list[tuple[str, bytes]] | None = None
+    lightmap: Any = None
+    # lighting: its result (``bake.lighting`` colours and effects) and the baked lightmap (uint8 RGBA)
+    lighting: Any = None
+    lightmap_image: Any = None
+    # bsp / bvh: the tree, its list names and encoding (read by the reader sprite and the previews)
+    bsp: dict[str, Any] | None = None
+    bvh: dict[str, Any] | None = None
+    # export: per list its items, bytes and file; the files to write (relative path -> bytes)
+    list_info: dict[str, dict] | None = None
+    outputs: dict[str, bytes] | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     # polygons as read
@@ -136,7 +162,7 @@ class Scene:
     materials: tuple[Material, ...] = (DEFAULT_MATERIAL,)
     lights: tuple[Light, ...] = ()
     lists: Mapping[str, ScratchList] = field(default_factory=dict)
-    artefacts: Mapping[str, Any] = field(default_factory=dict)
+    artefacts: Artefacts = field(default_factory=lambda: Artefacts())
     source: SourceInfo = field(default_factory=SourceInfo)
 
     # ------------------------------------------------------------------ helpers
@@ -148,10 +174,9 @@ class Scene:
         lists[lst.name] = lst
         return self.replace(lists=lists)
 
-    def with_artefact(self, name: str, value: Any) -> "Scene":
-        art = dict(self.artefacts)
-        art[name] = value
-        return self.replace(artefacts=art)
+    def with_artefacts(self, **made: Any) -> "Scene":
+        """The scene with the given :class:`Artefacts` fields set (``with_artefacts(bvh=...)``)."""
+        return self.replace(artefacts=dataclasses.replace(self.artefacts, **made))
 
     @property
     def n_vertices(self) -> int:

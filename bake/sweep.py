@@ -162,7 +162,7 @@ def _bake(cfg: Config, scene: Scene | None, key: str, stage_cache: Any = None) -
                           f"(set {section.split('.')[0] if stages[0] == 'lighting' else section}.enabled = true)",
                           key=key)
     lists = None
-    outputs = res.scene.artefacts.get("outputs", {})
+    outputs = res.scene.artefacts.outputs or {}
     if cfg.export.json_name in outputs:
         lists = json.loads(outputs[cfg.export.json_name]).get("lists", {})
     # the lighting stage's scene: its colours line up with the lighting artefact (a BSP splits later)
@@ -205,7 +205,7 @@ def _image_rmse(a: list[np.ndarray] | None, b: list[np.ndarray] | None) -> float
 
 
 def _colors(s: Scene) -> dict[str, np.ndarray | None]:
-    res = s.artefacts.get("lighting")
+    res = s.artefacts.lighting
     return {
         "vertex": None if s.vertex_colors is None else np.asarray(s.vertex_colors)[:, :3],
         "face": None if s.face_colors is None else np.asarray(s.face_colors)[:, :3],
@@ -359,8 +359,8 @@ def _row(v: Any, run: _Run, key: str) -> dict[str, Any]:
             if isinstance(x, (int, float)) and not isinstance(x, bool):
                 accuracy[k] = x
     last = run.final if run.final is not None else run.scene
-    info = last.artefacts.get("list_info", {})
-    costumes = last.artefacts.get("costumes", [])
+    info = last.artefacts.list_info or {}
+    costumes = last.artefacts.costumes or []
     return {
         "value": v,
         "seconds": round(run.seconds, 6),

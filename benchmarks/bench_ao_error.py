@@ -53,7 +53,7 @@ def bake_ao(scene, samples: int, seed: int):
     c.ao.distance = 0.25
     out, rec = stage(scene, c)
     effect = next(e for e in rec.effects if e["name"] == "ao")
-    return out.artefacts["lighting"], effect
+    return out.artefacts.lighting, effect
 
 
 def main() -> None:

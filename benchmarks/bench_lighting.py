@@ -172,7 +172,7 @@ def bunny_ao(quick: bool) -> dict:
                          "ratio_cpu": round(s["cpu"] / e["cpu"], 3),
                          "ratio_wall_without_build": round((s["wall"] - s["build_seconds"]) / e["wall"], 3)}
         if threads == 1:
-            ao256 = out.artefacts["lighting"].vertex["ao"]
+            ao256 = out.artefacts.lighting.vertex["ao"]
     res["threads"] = runs
     # accuracy on a random subset of vertices
     fn, area, _ = face_geometry(V, F)

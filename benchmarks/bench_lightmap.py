@@ -159,7 +159,7 @@ def bench_real_lighting(tmp: Path) -> dict:
     t = time.perf_counter()
     out, figs = lighting_lightmap.bake_lightmap(lit, light)
     t_map = time.perf_counter() - t
-    img = out.artefacts["lightmap_image"]
+    img = out.artefacts.lightmap_image
     try:
         from PIL import Image
 

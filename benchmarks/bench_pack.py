@@ -79,13 +79,13 @@ def with_export(cfg, **kw):
 def bake(cfg, out_dir: Path):
     t0 = time.perf_counter()
     res = pipeline.run(cfg)
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     sb3_name = next(n for n in files if n.endswith(".sb3"))
     path = out_dir / sb3_name
     path.write_bytes(files[sb3_name])
     export = next(r for r in res.records if r.name == "export")
     lists = json.loads(files["lists.json"])["lists"]
-    info = res.scene.artefacts["list_info"]
+    info = res.scene.artefacts.list_info
     return {"res": res, "path": path, "lists": lists, "info": info, "export": export,
             "seconds": time.perf_counter() - t0, "pj": export.details["project_json_bytes"]}
 

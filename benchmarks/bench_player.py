@@ -72,7 +72,7 @@ if job.get("demo"):
 else:
     cfg = config.load(data=job["data"])
 res = pipeline.run(cfg)
-files = res.scene.artefacts["outputs"]
+files = res.scene.artefacts.outputs
 name = next(n for n in files if n.endswith(".sb3"))
 open(job["out"], "wb").write(files[name])
 print(json.dumps({"triangles": res.scene.n_triangles, "vertices": res.scene.n_vertices, "file": name}))

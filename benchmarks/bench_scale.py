@@ -88,6 +88,7 @@ def write_obj_lines(path: Path, lines: int) -> None:
 CHILD = r'''
 import json, pickle, resource, sys, time, tracemalloc
 from bake import config as config_mod, pipeline, stages
+from bake.scene import Artefacts
 args = json.loads(sys.argv[1])
 cfg = config_mod.load(None, data=args["config"])
 cfg.input.path = args["model"]
@@ -108,7 +109,7 @@ traced = tracemalloc.get_traced_memory()[1]
 tracemalloc.stop()
 if args["output"]:
     with open(args["output"], "wb") as f:  # the next stage's input (artefacts hold callables)
-        pickle.dump(scene.replace(artefacts={}), f, protocol=5)
+        pickle.dump(scene.replace(artefacts=Artefacts()), f, protocol=5)
 print(json.dumps({"stage": rec.name, "seconds": seconds, "counts_in": rec.counts_in,
                   "counts_out": rec.counts_out or pipeline.counts(scene),
                   "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "input_loaded_kb": base,

@@ -137,7 +137,7 @@ def main() -> None:
             continue
         for layout, bits in LAYOUTS:
             res = bake(path, layout, bits)
-            files = res.scene.artefacts["outputs"]
+            files = res.scene.artefacts.outputs
             sb3_name = next(n for n in files if n.endswith(".sb3"))
             p = tmp / f"{name}-{layout}.sb3"
             p.write_bytes(files[sb3_name])
@@ -161,7 +161,7 @@ def main() -> None:
                               "call": {"target": "Mesh", "proccode": "bsp walk", "args": []},
                               "read": {"lists": ["draw ranges"]}} for e in eyes]
             jobs.append({"load": str(p), "runs": runs})
-            enc = res.scene.artefacts["bvh"]["encoded"]
+            enc = res.scene.artefacts.bvh["encoded"]
             enc = dataclasses.replace(enc, nodes=np.asarray(lists[spec.bvh.nodes], np.float64),
                                       tris=np.asarray(lists[spec.bvh.tris], np.float64),
                                       ids=np.asarray(lists[spec.bvh.ids], np.int64))  # as written
@@ -172,7 +172,7 @@ def main() -> None:
                          "bsp_ref": [[x for r in draw_ranges(lists[spec.bsp.nodes], lists[spec.bsp.planes], e)
                                       for x in r] for e in eyes] if eyes else [],
                          "bsp_items": (len(lists[spec.bsp.nodes]), len(lists[spec.bsp.planes])) if spec.bsp else None,
-                         "bsp": "bsp" in res.scene.artefacts,
+                         "bsp": res.scene.artefacts.bsp is not None,
                          "project_json_bytes": sb3.archive_sizes(files[sb3_name])["project_json_bytes"]})
     # TextImage: a photo texture at 64x64
     ti_runs = []

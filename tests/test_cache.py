@@ -508,7 +508,7 @@ def _payload():
                                                                     texture_data=b"\x89PNG"),))
     from bake.textures.stage import albedo_provider
 
-    s = s.with_artefact("x", {1: shared, "same": shared, "f": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
+    s = s.with_artefacts(texture_outputs={1: shared, "same": shared, "f": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
                               "rec": np.zeros(2, dtype=[("a", "<i4"), ("b", "<f8", (2,))]),
                               "empty": np.zeros((0, 3)), "scalars": (np.float32(1.5), np.int16(-3), np.bool_(True)),
                               "floats": [float("nan"), -0.0, 1e-300, float("inf")], "set": {3, 1, 2},
@@ -520,7 +520,7 @@ def test_entries_round_trip_types_identity_and_layout():
     data = _payload()
     buf = np.frombuffer(b"".join(encode_entry("k", "s", data)), np.uint8).copy()
     back = decode_entry(buf, "k", "s")
-    x, y = data["scene"].artefacts["x"], back["scene"].artefacts["x"]
+    x, y = data["scene"].artefacts.texture_outputs, back["scene"].artefacts.texture_outputs
     assert y["same"] is y[1]  # shared objects stay shared
     assert y["f"].flags.f_contiguous and not y["f"].flags.c_contiguous and np.array_equal(y["f"], x["f"])
     assert y["rec"].dtype == x["rec"].dtype and y["rec"].tobytes() == x["rec"].tobytes()

@@ -99,7 +99,7 @@ def test_uv_advice_does_not_ask_for_textures_that_are_on(tmp_path):
     sc = make_scene(V, [[0, 1, 2]], materials=(Material("m", texture=Path("t.png")),),
                     tri_uvs=np.zeros((1, 3, 2)))
     off = choose_lists(sc, ExportConfig())["tri uvs"]
-    on = choose_lists(sc.with_artefact("textures", object()), ExportConfig())["tri uvs"]
+    on = choose_lists(sc.with_artefacts(textures=object()), ExportConfig())["tri uvs"]
     assert "textures.enabled = true" in off.reason
     assert "textures.enabled" not in on.reason and "textures.encodings" in on.reason
 

@@ -549,7 +549,7 @@ def finish(scene: Scene, made: dict, rec: StageRecord) -> Scene:
     new = apply_layout(scene, layout)
     new = new.with_list(ScratchList(NODES_LIST, made["nodes"].copy(), 0, _NODES_DOC, "int"))
     new = new.with_list(ScratchList(PLANES_LIST, made["planes"].ravel().copy(), 4, _PLANES_DOC, "number"))
-    new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": made["stack_bound"],
+    new = new.with_artefacts(bsp={"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": made["stack_bound"],
                                     "epsilon": made["tolerance"],
                                     "source_triangle": layout["source_triangle"],
                                     "source_face": layout["source_face"],
@@ -573,7 +573,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     if T_in == 0:
         new = scene.with_list(ScratchList(NODES_LIST, np.zeros(0, np.int64), 0, _NODES_DOC, "int"))
         new = new.with_list(ScratchList(PLANES_LIST, np.zeros(0), 4, _PLANES_DOC, "number"))
-        new = new.with_artefact("bsp", {"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": 2,
+        new = new.with_artefacts(bsp={"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": 2,
                                         "epsilon": opt.epsilon})
         rec.warn("no triangles: empty BSP")
         rec.seconds = time.perf_counter() - t0

@@ -11,6 +11,7 @@
 What the rest of bake uses is imported here.
 """
 
+from ..errors import ConfigError
 from .keys import FILE_RELATIVE_KEYS, PATH_KEYS, all_keys, get_key, key_defaults, numeric_keys, to_dict
 from .loader import apply_override, load, parse_value, validate
 from .origins import error_at, origin
@@ -19,7 +20,7 @@ from .schema import (RESERVED_OUTPUT_NAMES, AOConfig, BouncesConfig, BSPConfig, 
                      LightmapConfig, ListNames, MeshConfig, ReportConfig, ShadowsConfig, SimplifyConfig, SkyConfig,
                      TexturesConfig, TransformConfig, TriangulateConfig, stage_sections, use_stage_sections)
 
-__all__ = ["FILE_RELATIVE_KEYS", "PATH_KEYS", "all_keys", "get_key", "key_defaults", "numeric_keys", "to_dict",
+__all__ = ["ConfigError", "FILE_RELATIVE_KEYS", "PATH_KEYS", "all_keys", "get_key", "key_defaults", "numeric_keys", "to_dict",
            "apply_override", "load", "parse_value", "validate", "error_at", "origin", "RESERVED_OUTPUT_NAMES",
            "AOConfig", "BouncesConfig", "BSPConfig", "BVHConfig", "CacheConfig", "CleanConfig", "Config",
            "ExportConfig", "ImportConfig", "ImportJob", "InputConfig", "LightConfig", "LightingConfig",

@@ -97,8 +97,8 @@ class ListChoice:
 def textures_in_project(scene: Scene) -> bool:
     """Whether the bake puts a texture into the project (a costume or a texture list) that an
     engine can sample with ``tri uvs``."""
-    out = scene.artefacts.get("texture_outputs") or {}
-    return bool(scene.artefacts.get("costumes")) or bool(out.get("lists"))
+    out = scene.artefacts.texture_outputs or {}
+    return bool(scene.artefacts.costumes) or bool(out.get("lists"))
 
 
 def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
@@ -144,12 +144,12 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
         pick(n.uvs, "export.uvs", cfg.uvs, has_uv, has_uv and tex,
              ("no texture goes into the project (textures.encodings writes none), so nothing would sample the "
               "UVs; add \"list\", \"textimage\" or \"costume\" to textures.encodings, or set export.uvs = \"yes\""
-              if "textures" in scene.artefacts else
+              if scene.artefacts.textures is not None else
               "no texture goes into the project (textures.enabled = false), so nothing would sample the UVs; set "
               "textures.enabled = true to bake the texture, or export.uvs = \"yes\"")
              if has_uv else "the scene has no textured triangles with UVs"),
         pick(n.lightmap_uvs, "export.lightmap_uvs", cfg.lightmap_uvs, has_lm, has_lm, "the scene has no lightmap"),
-        pick(n.two_sided, "export.two_sided", cfg.two_sided, two, two or "bsp" in scene.artefacts,
+        pick(n.two_sided, "export.two_sided", cfg.two_sided, two, two or scene.artefacts.bsp is not None,
              "every material is single-sided and there is no BSP tree"),
     )}
 
@@ -188,11 +188,11 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
     # lists that hold one entry per written triangle (or number the scene's triangles): a quad or
     # n-gon written whole would leave its triangles without them
     per_tri = [f"'{c.name}'" for c in (choice[n.triangle_colors], choice[n.uvs], choice[n.lightmap_uvs]) if c.write]
-    if "bvh" in scene.artefacts:
+    if scene.artefacts.bvh is not None:
         per_tri.append("the BVH's triangle numbers")
-    whole_faces = cfg.faces != "triangles" and "bsp" not in scene.artefacts and not per_tri
+    whole_faces = cfg.faces != "triangles" and scene.artefacts.bsp is None and not per_tri
     if cfg.faces != "triangles":
-        if "bsp" in scene.artefacts:
+        if scene.artefacts.bsp is not None:
             record.warn(f"export.faces = '{cfg.faces}' ignored: the BSP stage orders triangles, "
                         "so every face is written to the triangle list")
         elif per_tri:
@@ -288,7 +288,7 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
 
     if choice[n.lightmap_uvs].write:
         lm = scene.tri_lightmap_uvs if scene.tri_lightmap_uvs is not None else np.zeros((T, 3, 2))
-        img = scene.artefacts.get("lightmap_image")
+        img = scene.artefacts.lightmap_image
         side = max(img.shape[:2]) if img is not None else 4096
         out.append(ScratchList(n.lightmap_uvs, lm[keep_mask].ravel(), 6,
                                "lightmap u1, v1, u2, v2, u3, v3 per triangle (v up)", "number",

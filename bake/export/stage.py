@@ -70,14 +70,14 @@ def stage(scene: Scene, cfg: ExportConfig) -> tuple[Scene, StageRecord]:
         files.update(projects)
     elif cfg.pack:
         rec.warn("export.pack: no project is written (export.sb3, sprite3 and into are off), so nothing is packed")
-    for cname, png in scene.artefacts.get("costumes", []) or []:  # texture costumes as files too
+    for cname, png in scene.artefacts.costumes or []:  # texture costumes as files too
         files[f"assets/{re.sub(r'[^A-Za-z0-9._-]+', '_', cname).strip('._') or 'costume'}.png"] = png
 
     new = scene.replace(lists={lst.name: lst for lst in lists})
     if extra_read:  # the project baked into: protected from overwriting, and a depfile input
         new = new.replace(source=dataclasses.replace(
             new.source, files_read=tuple(new.source.files_read) + tuple(extra_read)))
-    new = new.with_artefact("outputs", files).with_artefact("list_info", info)
+    new = new.with_artefacts(outputs=files).with_artefacts(list_info=info)
     rec.details["lists"] = info
     rec.seconds = time.perf_counter() - t0
     return new, rec

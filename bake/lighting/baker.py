@@ -392,7 +392,7 @@ def coloured(traced: dict, cfg: LightingConfig) -> Scene:
     vertex_colors = np.clip(np.nan_to_num(vertex_colors, nan=0.0), 0.0, 1.0)
     face_colors = np.clip(np.nan_to_num(face_colors, nan=0.0), 0.0, 1.0)
     out = traced["scene"].replace(vertex_colors=vertex_colors, face_colors=face_colors)
-    return out.with_artefact("lighting", traced["result"])
+    return out.with_artefacts(lighting=traced["result"])
 
 
 def _vertex_from_faces(tris: np.ndarray, area: np.ndarray, V: int, face_vals: np.ndarray) -> np.ndarray:

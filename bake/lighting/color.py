@@ -2,7 +2,7 @@
 
 1. **Albedo** per triangle, RGBA in [0, 1] as Scratch shows colours (sRGB-encoded): by default
    the material colour times the triangle's mean vertex colour (``Scene.triangle_albedo``). A
-   stage that knows better puts a provider in ``scene.artefacts["albedo"]`` (a function
+   stage that knows better puts a provider in ``scene.artefacts.albedo`` (a function
    Scene -> (T, 4), re-evaluated for the current triangles, e.g. after subdivision): the
    textures stage's mean of the texture over each triangle's UV area. ``albedo=`` passed to the
    stage overrides both.
@@ -29,7 +29,7 @@ AlbedoProvider = Callable[["object"], np.ndarray]  # Scene -> (T, 4) RGBA in [0,
 
 
 def triangle_albedo(scene, override: AlbedoProvider | None = None) -> np.ndarray:
-    fn = override or scene.artefacts.get("albedo")
+    fn = override or scene.artefacts.albedo
     a = fn(scene) if fn is not None else scene.triangle_albedo()
     a = np.nan_to_num(np.asarray(a, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
     if a.shape != (scene.n_triangles, 4):

@@ -110,7 +110,7 @@ def scene_albedo(scene: Scene):
     """The unlit albedo for shading ``scene``'s texels: the one the lighting stage used when
     ``scene`` is its output (``LightingResult.albedo``, same triangles), else ``None`` (the
     scene's own base colour)."""
-    res = scene.artefacts.get("lighting")
+    res = scene.artefacts.lighting
     if isinstance(res, LightingResult) and res.albedo is not None and len(res.albedo) == scene.n_triangles:
         return res.albedo
     return None
@@ -120,14 +120,14 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
     """``lighting.target = "lightmap"``: light every texel of the textures stage's atlas with the
     lighting stage's kernels (:func:`light_function`, ``lighting.vertex_output`` = "light" or
     "color"), then splat, dilate and stitch (:func:`bake`). The image (RGBA uint8, opaque) goes
-    to ``scene.artefacts["lightmap_image"]`` and out in the same encodings as the material
+    to ``scene.artefacts.lightmap_image`` and out in the same encodings as the material
     textures (``textures.encodings``; names from the textures ``*_name`` keys with
     ``{material}`` = ``name``). ``albedo`` as for :func:`light_function`; by default the unlit
     albedo the lighting stage recorded when ``scene`` is its output (:func:`scene_albedo`).
     Returns (scene, figures for the lighting record)."""
     from ..textures.encode import ENCODINGS, encode_texture
 
-    job = scene.artefacts.get("lightmap")
+    job = scene.artefacts.lightmap
     if not isinstance(job, LightmapJob):
         raise StageError("lighting.target = 'lightmap' needs the lightmap atlas: set textures.enabled = true "
                          "and textures.lightmap.enabled = true (the textures stage runs before lighting)",
@@ -162,7 +162,7 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
             written[e] = "not requested (textures.encodings)"
         elif e == "costume":
             if enc.sizes["costume"]["under_asset_limit"]:
-                scene = scene.with_artefact("costumes", [*scene.artefacts.get("costumes", []), enc.costume])
+                scene = scene.with_artefacts(costumes=[*(scene.artefacts.costumes or []), enc.costume])
                 written[e] = "written"
             else:
                 written[e] = "not written: over the 10 MB asset limit"
@@ -178,5 +178,5 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
     figs.update({"output": output, "seam_error_8bit": q["max"], "rays": ray_stats(),
                  "encodings": {e: {**enc.sizes[e], "written": written[e]} for e in ENCODINGS},
                  "seconds": round(time.perf_counter() - t0, 6)})
-    scene = scene.with_artefact("lightmap_image", img8)
+    scene = scene.with_artefacts(lightmap_image=img8)
     return scene, figs

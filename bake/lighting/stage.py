@@ -12,7 +12,7 @@ Flow (each step in its own module):
 4. ``bounce``: indirect light gathered ``bounces.count`` times on the final mesh.
 5. ``color``: albedo x irradiance x exposure, tone map, encode -> ``vertex_colors`` and
    ``face_colors``. The linear irradiance and every component with its standard error stay in
-   ``scene.artefacts["lighting"]`` (a :class:`LightingResult`).
+   ``scene.artefacts.lighting`` (a :class:`LightingResult`).
 
 The record lists every effect that ran (rays, seconds, error = an estimate of the RMSE of its
 values over the sample points: the RMS of the points' standard errors, in irradiance units; AO in
@@ -109,7 +109,7 @@ def _black(out: Scene, albedo: np.ndarray, cfg: LightingConfig, has_source: bool
         shown.append(to_bytes(out.vertex_colors[used, :3]))
     if any(np.any(b > 0) for b in shown):
         return None
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     if not has_source:
         why = what
     elif cfg.exposure == 0:

@@ -81,7 +81,7 @@ def finish(result: BakeResult, out_dir: Path, *, depfile: Path | None = None,
     ``html.live_script``; report-live.js is written after the commit)."""
     out_dir = Path(out_dir)
     cfg = result.config
-    files: dict[str, bytes] = dict(result.scene.artefacts.get("outputs", {}))
+    files: dict[str, bytes] = dict(result.scene.artefacts.outputs or {})
     src = result.scene.source
     protect = set(src.files_read) | ({cfg.source} if cfg.source else set())
     assets = {k: len(v) for k, v in files.items() if k.startswith("assets/")}

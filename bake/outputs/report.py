@@ -37,7 +37,7 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
           assets: dict[str, int] | None = None) -> dict[str, Any]:
     scene = result.scene
     assets = dict(assets or {})
-    info = scene.artefacts.get("list_info", {})
+    info = scene.artefacts.list_info or {}
     lists = {name: {"items": v["items"], "stride": v["stride"], "bytes": v["project_json_bytes"],
                     "file": v.get("file"), "doc": v.get("doc", ""),
                     **({"plain_bytes": v["plain_bytes"], "packed": v["packed"]} if "packed" in v else {})}

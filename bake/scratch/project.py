@@ -72,7 +72,7 @@ def auto_camera(verts: list[float] | np.ndarray) -> readers.Camera:
 
 
 def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
-    art = scene.artefacts.get("bvh") if scene is not None else None
+    art = scene.artefacts.bvh if scene is not None else None
     if not art or "encoded" not in art:
         return None
     enc = art["encoded"]
@@ -116,7 +116,7 @@ def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.Reader
 
 
 def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
-    art = scene.artefacts.get("bsp") if scene is not None else None
+    art = scene.artefacts.bsp if scene is not None else None
     if not art:
         return None
     nodes, planes = art.get("nodes", "bsp nodes"), art.get("planes", "bsp planes")
@@ -158,10 +158,10 @@ def _stale_lists(proj: dict | None, target: str, written: dict[str, list], cfg: 
 
 
 def texture_costumes(scene: Any) -> list[sb3.Costume]:
-    """The textures stage's PNG costumes (``artefacts["costumes"]``: (name, png bytes)) as
+    """The textures stage's PNG costumes (``artefacts.costumes``: (name, png bytes)) as
     bitmapResolution-2 costumes centred on the image (sizes read from the PNG header)."""
     out = []
-    for cname, png in scene.artefacts.get("costumes", []) or []:
+    for cname, png in scene.artefacts.costumes or []:
         w = int.from_bytes(png[16:20], "big") if png[:8] == b"\x89PNG\r\n\x1a\n" else 2
         h = int.from_bytes(png[20:24], "big") if png[:8] == b"\x89PNG\r\n\x1a\n" else 2
         out.append(sb3.Costume(cname, sb3.Asset(png, "png"), 2, (w / 2.0, h / 2.0)))

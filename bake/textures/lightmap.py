@@ -1094,7 +1094,7 @@ def coverage_figures(scene: Scene, atlas: Atlas, smp: TexelSamples | None = None
 
 @dataclass
 class LightmapJob:
-    """``scene.artefacts["lightmap"]``, left by the textures stage for the lighting stage."""
+    """``scene.artefacts.lightmap``, left by the textures stage for the lighting stage."""
 
     atlas: Atlas
     config: LightmapConfig

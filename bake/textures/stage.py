@@ -11,15 +11,15 @@ It runs after the mesh is final (triangulate, clean, simplify) and **before ligh
    ``Scene.triangle_albedo()`` and so the lighting stage use) and to ``face_colors`` (what export
    writes as the "tri colors" list; lighting replaces it with lit colours).
    :func:`albedo_provider` recomputes it for a changed triangle set (lighting's subdivision); the
-   stage puts it in ``scene.artefacts["albedo"]``, where the lighting stage looks for one.
+   stage puts it in ``scene.artefacts.albedo``, where the lighting stage looks for one.
 3. **Resample** each texture (``width``/``height``/``max_size``/``power_of_two``/``filter``/
    ``wrap``) and **encode** it (``bake/textures/encode.py``): colour list + size list, TextImage
-   string list, PNG costume (``scene.artefacts["costumes"]``: ``[(name, png_bytes)]`` for
+   string list, PNG costume (``scene.artefacts.costumes``: ``[(name, png_bytes)]`` for
    bitmapResolution 2). The record compares all three encodings for every texture.
 4. **Lightmap atlas** (``lightmap.enabled``): xatlas unwrap (subprocess, cached in the output
    folder's ``.bake-cache/xatlas`` unless ``lightmap.cache_dir`` says otherwise) ->
    ``Scene.tri_lightmap_uvs`` (exported as the ``lightmap uvs`` list) and
-   ``scene.artefacts["lightmap"]`` (a ``lightmap.LightmapJob``: atlas + settings) for the lighting
+   ``scene.artefacts.lightmap`` (a ``lightmap.LightmapJob``: atlas + settings) for the lighting
    stage's ``target = "lightmap"`` (``bake.lighting.lightmap.bake_lightmap``); coverage figures in the record.
    A crash, a timeout or a too-large mesh is a failure: the bake goes on without a lightmap and
    warns, and ``--strict`` exits 5 (a stage failed).
@@ -56,7 +56,7 @@ class Texture:
 
 @dataclass
 class TextureSet:
-    """``scene.artefacts["textures"]``: what :func:`albedo_provider` needs, and the textures."""
+    """``scene.artefacts.textures``: what :func:`albedo_provider` needs, and the textures."""
 
     textures: list[Texture] = field(default_factory=list)
     albedo_images: dict[int, np.ndarray] = field(default_factory=dict)  # material -> averaged image
@@ -120,7 +120,7 @@ def albedo_provider(scene: Scene) -> np.ndarray:
     *current* triangles (exact after the lighting stage splits triangles), else
     ``scene.triangle_albedo()``; a ``face_albedo`` left over from a different triangle set is
     ignored."""
-    ts = scene.artefacts.get("textures")
+    ts = scene.artefacts.textures
     if isinstance(ts, TextureSet) and ts.albedo_images:
         return textured_albedo(scene, ts.albedo_images, ts.average)
     if scene.face_albedo is not None and len(scene.face_albedo) != scene.n_triangles:
@@ -237,17 +237,17 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
         ta = time.perf_counter()
         alb = textured_albedo(scene, albedo_images, cfg.average)
         scene = scene.replace(face_albedo=alb, face_colors=alb.copy())
-        scene = scene.with_artefact("textures", tex_set).with_artefact("albedo", albedo_provider)
+        scene = scene.with_artefacts(textures=tex_set).with_artefacts(albedo=albedo_provider)
         rec.effects.append({"name": "colors", "ran": True, "seconds": round(time.perf_counter() - ta, 6),
                             "reason": f"texture mean over each triangle's UV area ({cfg.average}) x material "
                                       f"x vertex colour -> face_albedo, face_colors ({textured_tris} textured "
                                       "triangles)"})
-    if "textures" not in scene.artefacts:
-        scene = scene.with_artefact("textures", TextureSet(textures=textures, albedo_images={},
+    if scene.artefacts.textures is None:
+        scene = scene.with_artefacts(textures=TextureSet(textures=textures, albedo_images={},
                                                            average=cfg.average))
 
     # 2. encodings
-    costumes: list[tuple[str, bytes]] = list(scene.artefacts.get("costumes", []))
+    costumes: list[tuple[str, bytes]] = list(scene.artefacts.costumes or [])
     written_lists: list[str] = []  # for the export's list choice: a texture in the project needs UVs
     details = []
     seen_names: set[str] = set(scene.lists)
@@ -290,8 +290,8 @@ def stage(scene: Scene, cfg: TexturesConfig) -> tuple[Scene, StageRecord]:
             "encodings": {e: {**enc.sizes[e], "written": written[e]} for e in ENCODINGS},
         })
     if costumes:
-        scene = scene.with_artefact("costumes", costumes)
-    scene = scene.with_artefact("texture_outputs", {"lists": written_lists,
+        scene = scene.with_artefacts(costumes=costumes)
+    scene = scene.with_artefacts(texture_outputs={"lists": written_lists,
                                                     "costumes": [c[0] for c in costumes]})
     rec.details["textures"] = details
     rec.details["size_table"] = size_table([t.encoded for t in textures])
@@ -371,7 +371,7 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
                  "textures.lightmap.padding")
     # the export stage writes the list from tri_lightmap_uvs (in the final triangle order)
     scene = scene.replace(tri_lightmap_uvs=atlas.tri_uvs.copy())
-    scene = scene.with_artefact("lightmap", lightmap.LightmapJob(atlas=atlas, config=lm, textures=cfg))
+    scene = scene.with_artefacts(lightmap=lightmap.LightmapJob(atlas=atlas, config=lm, textures=cfg))
     rec.details["lightmap"] = figs
     rec.accuracy["lightmap coverage"] = figs["coverage"]
     rec.effects.append({"name": "lightmap", "ran": True, "seconds": round(time.perf_counter() - t0, 6),

@@ -22,7 +22,7 @@ HOUSE = ("house_max2obj_walls", "regr01.obj")
 def _bake(path, *overrides):
     cfg = pipeline.load_config_for(path, list(overrides))
     res = pipeline.run(cfg, until="export")
-    lists = json.loads(res.scene.artefacts["outputs"]["lists.json"])["lists"]
+    lists = json.loads(res.scene.artefacts.outputs["lists.json"])["lists"]
     return res, lists
 
 

@@ -23,7 +23,7 @@ def run(model, **sections):
 
 
 def outputs(res):
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     lists = json.loads(files["lists.json"])["lists"]
     export = next(r for r in res.records if r.name == "export")
     return files, lists, export
@@ -190,7 +190,7 @@ def test_into_a_sprite_stays_plain_and_empties_old_packed_texts(tmp_path):
     # plain bake into the stage of a project that held packed texts: they are emptied, so an old
     # loader cannot overwrite the fresh lists at the green flag
     res = run(model, export={"into": str(proj), "into_name": "p.sb3"})
-    project, _ = sb3.load_project(res.scene.artefacts["outputs"]["p.sb3"])
+    project, _ = sb3.load_project(res.scene.artefacts.outputs["p.sb3"])
     stage = {e[0]: e[1] for e in project["targets"][0]["lists"].values()}
     assert stage["packed lists"] == [] and stage["verts"] == outputs(res)[1]["verts"]
 

@@ -25,7 +25,7 @@ def _scene(flags):
 
 def _lists(scene, **kw):
     out, _ = stage(scene, ExportConfig(sb3=False, sprite3=False, **kw))
-    files = out.artefacts["outputs"]
+    files = out.artefacts.outputs
     doc = json.loads(files["lists.json"])
     return files, doc
 
@@ -55,7 +55,7 @@ def test_a_bsp_bake_writes_it_and_the_reader_sprite_reads_the_exported_list(tmp_
     cfg = config_mod.load(None, ["bsp.enabled=true"])
     cfg.input.path = str(obj)
     res = run(cfg)
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     assert json.loads(files["lists.json"])["lists"]["mat two-sided"] == [0]
     pj = json.loads(zipfile.ZipFile(io.BytesIO(files["m.sb3"])).read("project.json"))
     stage_lists = [v[0] for t in pj["targets"] if t["isStage"] for v in t["lists"].values()]

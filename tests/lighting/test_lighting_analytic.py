@@ -20,7 +20,7 @@ def test_sun_on_open_plane_is_exactly_cos_theta(frame, target):
     for d, angle in (((0, -1, 0), 0.0), ((0.3, -1, 0.2), 0.53), ((-1, -0.4, 0.5), 5.0), ((1, -0.05, 0), 2.0)):
         c = cfg(target=target, lights=[sun(d, angle=angle)], face_cell=0.2)
         out, rec = stage(sc, c)
-        res = out.artefacts["lighting"]
+        res = out.artefacts.lighting
         dd = np.asarray(d, float) / np.linalg.norm(d)
         cos = -dd[1]
         if target == "vertex":
@@ -43,7 +43,7 @@ def test_ao_of_isolated_plane_and_convex_bodies_is_exactly_one(frame):
         sc = scene(pos, tris, frame)
         out, rec = stage(sc, cfg(target=target, ao__enabled=True, ao__samples=256, ao__distance=2.0,
                                  face_cell=0.15))
-        res = out.artefacts["lighting"]
+        res = out.artefacts.lighting
         assert np.all(res.vertex["ao"][res.vertex_evaluated] == 1.0), "self-intersection (acne)"
         assert np.all(res.face["ao"] == 1.0)
         assert res.vertex_evaluated.any() if target == "vertex" else res.face_sampled.all()
@@ -65,7 +65,7 @@ def test_closed_box_lit_from_outside_is_exactly_zero_inside(frame):
                 sky__enabled=True, sky__samples=64, bounces__count=2, bounces__samples=32,
                 shadows__samples=16, face_cell=0.2)
         out, rec = stage(sc, c)
-        res = out.artefacts["lighting"]
+        res = out.artefacts.lighting
         inside_t = np.arange(n_inside)
         inside_v = np.unique(tris[inside_t])
         assert np.all(res.face_irradiance[inside_t] == 0.0), "light leaked into the closed box"
@@ -84,7 +84,7 @@ def test_sphere_on_plane_ao_matches_exact_view_factor_and_reference(frame):
     sc = scene(pos, tris, frame)
     c = cfg(ao__enabled=True, ao__samples=256, ao__distance=1.0, face_cell=0.0 + 1.0)
     out, _ = stage(sc, c)
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     nf = len(floor[0])
     # exact: 1 - form factor of the (tessellated, convex) sphere from each floor vertex
     p = floor[0]
@@ -96,7 +96,7 @@ def test_sphere_on_plane_ao_matches_exact_view_factor_and_reference(frame):
     assert abs(float(np.mean(ao - exact))) < 3 * np.sqrt(np.mean(se ** 2) / nf) + 1e-9  # no bias
     # all points (sphere too) against an independent 8x-sample reference, within the error estimate
     ref, _ = stage(sc, cfg(ao__enabled=True, ao__samples=2048, ao__distance=1.0, seed=7))
-    rr = ref.artefacts["lighting"]
+    rr = ref.artefacts.lighting
     ev = res.vertex_evaluated
     tot = np.sqrt(res.vertex_se["ao"][ev] ** 2 + rr.vertex_se["ao"][ev] ** 2)
     zz = (res.vertex["ao"][ev] - rr.vertex["ao"][ev]) / np.maximum(tot, 1e-12)
@@ -111,10 +111,10 @@ def test_sky_on_open_plane_and_wall():
     sc = scene(pos, tris)
     out, _ = stage(sc, cfg(sky__enabled=True, sky__color=[0.9, 0.9, 0.9], sky__horizon=[0.9, 0.9, 0.9],
                            sky__intensity=1.0))
-    np.testing.assert_allclose(out.artefacts["lighting"].vertex["sky"], 0.9, rtol=1e-12)
+    np.testing.assert_allclose(out.artefacts.lighting.vertex["sky"], 0.9, rtol=1e-12)
     z, h = np.array([0.2, 0.4, 1.0]), np.array([0.8, 0.6, 0.4])
     out, _ = stage(sc, cfg(sky__enabled=True, sky__color=list(z), sky__horizon=list(h), sky__samples=1024))
-    r = out.artefacts["lighting"]
+    r = out.artefacts.lighting
     want = h + (z - h) * 2 / 3
     lum = r.vertex["sky"] @ [0.2126, 0.7152, 0.0722]
     assert np.all(np.abs(lum - want @ [0.2126, 0.7152, 0.0722]) <= 4 * r.vertex_se["sky"] + 1e-9)
@@ -122,7 +122,7 @@ def test_sky_on_open_plane_and_wall():
     wall = scene(pos[:, [1, 0, 2]], tris[:, ::-1])
     out, _ = stage(wall, cfg(sky__enabled=True, sky__color=[1, 1, 1], sky__horizon=[1, 1, 1],
                              sky__ground=[0, 0, 0], sky__samples=1024))
-    r = out.artefacts["lighting"]
+    r = out.artefacts.lighting
     assert np.all(np.abs(r.vertex["sky"][:, 0] - 0.5) <= 4 * r.vertex_se["sky"])
 
 
@@ -134,5 +134,5 @@ def test_far_apart_objects_have_no_acne():
     pos, tris = merge(a, (b_pos + [1e4, 3e3, -2e3], b_tris))
     out, _ = stage(scene(pos, tris, (1e5, 1.0)), cfg(target="triangle", ao__enabled=True, ao__samples=64,
                                                      ao__distance=1e-4))
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     assert np.all(res.face["ao"] == 1.0)

@@ -20,7 +20,7 @@ def test_furnace_closed_room_gives_geometric_series(frame, target):
     for n in (1, 2, 3):
         out, rec = stage(sc, cfg(target=target, color_space="linear", ambient=[a, a, a], bounces__count=n,
                                  bounces__samples=16, face_cell=0.2))
-        res = out.artefacts["lighting"]
+        res = out.artefacts.lighting
         want = a * sum(rho ** k for k in range(n + 1))
         np.testing.assert_allclose(res.face_irradiance, want, rtol=1e-9)
         if target == "vertex":
@@ -37,14 +37,14 @@ def test_open_plane_gets_no_bounce_and_sphere_gets_floor_light():
     pos, tris = grid(6, size=2.0)
     # nothing to bounce off: every ray misses
     out, _ = stage(scene(pos, tris), cfg(lights=[sun((0, -1, 0))], bounces__count=1, bounces__samples=16))
-    assert np.all(out.artefacts["lighting"].vertex["indirect"] == 0)
+    assert np.all(out.artefacts.lighting.vertex["indirect"] == 0)
     R = 0.3
     ball = sphere(2, radius=R, center=(0, R + 0.05, 0))
     floor = grid(8, size=4.0)
     p2, t2 = merge(floor, ball)
     out, rec = stage(scene(p2, t2, color=(0.7, 0.7, 0.7, 1)),
                      cfg(lights=[sun((0, -1, 0))], bounces__count=1, bounces__samples=64))
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     nf = len(floor[0])
     bottom = np.flatnonzero(ball[0][:, 1] < R * 0.5) + nf  # lower part of the sphere: in the sun's shadow
     assert np.all(res.vertex["direct"][bottom] == 0)
@@ -61,7 +61,7 @@ def test_back_face_hits_bring_no_light():
     pos, tris = merge(inner, shell)
     out, rec = stage(scene(pos, tris), cfg(ambient=[1.0, 1.0, 1.0], bounces__count=2, bounces__samples=16,
                                           color_space="linear"))
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     ni = len(inner[0])
     assert np.all(res.vertex["indirect"][:ni] == 0)
     assert {e["name"]: e for e in rec.effects}["bounces"]["rays"] > 0

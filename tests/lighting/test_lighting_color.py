@@ -51,11 +51,11 @@ def test_albedo_is_pluggable():
     red = lambda s: np.tile([1.0, 0.0, 0.0, 1.0], (s.n_triangles, 1))  # noqa: E731
     out, _ = stage(sc, cfg(lights=[sun((0, -1, 0))]), albedo=red)
     np.testing.assert_allclose(out.face_colors, np.tile([1.0, 0.0, 0.0, 1.0], (sc.n_triangles, 1)))
-    green = sc.with_artefact("albedo", lambda s: np.tile([0.0, 1.0, 0.0, 1.0], (s.n_triangles, 1)))
+    green = sc.with_artefacts(albedo=lambda s: np.tile([0.0, 1.0, 0.0, 1.0], (s.n_triangles, 1)))
     out, _ = stage(green, cfg(lights=[sun((0, -1, 0))]))
     np.testing.assert_allclose(out.face_colors[:, 1], 1.0)
     out, _ = stage(sc, cfg(lights=[sun((0, -1, 0))]))  # the provider travels with its scene only
     np.testing.assert_allclose(out.face_colors, np.tile(sc.materials[0].color, (sc.n_triangles, 1)))
-    bad = sc.with_artefact("albedo", lambda s: np.zeros((1, 4)))
+    bad = sc.with_artefacts(albedo=lambda s: np.zeros((1, 4)))
     with pytest.raises(ValueError):
         stage(bad, cfg(lights=[sun((0, -1, 0))]))

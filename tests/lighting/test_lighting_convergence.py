@@ -26,7 +26,7 @@ def test_ao_error_falls_at_least_as_one_over_sqrt_samples():
     ns, errs, ses = [16, 64, 256, 1024], [], []
     for n in ns:
         out, _ = stage(sc, cfg(ao__enabled=True, ao__samples=n, ao__distance=1.0))
-        r = out.artefacts["lighting"]
+        r = out.artefacts.lighting
         errs.append(np.sqrt(np.mean((r.vertex["ao"][:nf] - exact) ** 2)))
         ses.append(np.sqrt(np.mean(r.vertex_se["ao"][:nf] ** 2)))
     assert _slope(ns, errs) <= -0.5, (errs, _slope(ns, errs))
@@ -71,7 +71,7 @@ def test_soft_shadow_penumbra_matches_exact_integral_and_converges(frame):
     ns, errs = [4, 16, 64, 256], []
     for n in ns:
         out, rec = stage(sc, cfg(lights=[sun((0, -1, 0), angle=angle)], shadows__samples=n))
-        r = out.artefacts["lighting"]
+        r = out.artefacts.lighting
         vis = r.vertex["direct"][:nf, 0]  # cos = 1 on the floor
         se = r.vertex_se["direct"][:nf]
         assert np.all(np.abs(vis - exact) <= 4 * se + 1e-9)
@@ -126,8 +126,8 @@ def test_ao_error_figure_is_calibrated_against_a_high_sample_reference():
     2048-ray bakes, minus that reference's own variance; pooled over four seeds."""
     sc = _cluttered_floor()
     kw = dict(ao__enabled=True, ao__distance=0.25, face_cell=10.0)
-    r1 = stage(sc, cfg(ao__samples=2048, seed=101, **kw))[0].artefacts["lighting"]
-    r2 = stage(sc, cfg(ao__samples=2048, seed=202, **kw))[0].artefacts["lighting"]
+    r1 = stage(sc, cfg(ao__samples=2048, seed=101, **kw))[0].artefacts.lighting
+    r2 = stage(sc, cfg(ao__samples=2048, seed=202, **kw))[0].artefacts.lighting
     ev = r1.vertex_evaluated
     assert ev.sum() > 2000
     ref = (r1.vertex["ao"][ev] + r2.vertex["ao"][ev]) / 2
@@ -136,7 +136,7 @@ def test_ao_error_figure_is_calibrated_against_a_high_sample_reference():
         est2, act2 = [], []
         for seed in range(4):
             out, rec = stage(sc, cfg(ao__samples=n, seed=seed, **kw))
-            res = out.artefacts["lighting"]
+            res = out.artefacts.lighting
             assert np.array_equal(res.vertex_evaluated, ev)  # the same points as the figure covers
             act2.append(np.mean((res.vertex["ao"][ev] - ref) ** 2) - ref_var)
             ao = [e for e in rec.effects if e["name"] == "ao"][0]

@@ -34,7 +34,7 @@ def _check(sc, rec):
     sc.validate()
     for a in (sc.vertex_colors, sc.face_colors):
         assert a is not None and np.isfinite(a).all() and a.min() >= 0 and a.max() <= 1
-    res = sc.artefacts["lighting"]
+    res = sc.artefacts.lighting
     assert np.isfinite(res.face_irradiance).all() and res.face_irradiance.min() >= 0
     for e in rec.effects:
         if e["ran"] and "error" in e:

@@ -30,7 +30,7 @@ def test_no_lights_no_direct_pass_and_default_effects_skipped():
     assert not e["sky"]["ran"] and not e["bounces"]["ran"] and "count = 0" in e["bounces"]["reason"]
     assert not e["subdivide"]["ran"]
     assert rec.details["rays"] == 0 and rec.details["timing"]["build_seconds"] == 0  # no Embree scene
-    np.testing.assert_allclose(out.artefacts["lighting"].face_irradiance, 0.5)
+    np.testing.assert_allclose(out.artefacts.lighting.face_irradiance, 0.5)
 
 
 def test_rays_counted_per_effect():
@@ -75,7 +75,7 @@ def test_imported_lights_used_unless_disabled():
     out, rec = stage(sc, cfg())
     e = _eff(rec)
     assert e["light[0] point 'lamp'"]["ran"] and e["light[0] point 'lamp'"]["source"] == "model.gltf"
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     i = np.argmin(np.linalg.norm(sc.positions - [0, 0, 0], axis=1))  # vertex under the lamp
     assert res.vertex["direct"][i, 0] == pytest.approx(2.0)  # intensity / d^2, cos = 1
     out2, rec2 = stage(sc, cfg(import_lights=False))

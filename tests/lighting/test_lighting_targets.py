@@ -24,7 +24,7 @@ def test_face_colour_is_area_average_not_vertex_mean(target):
     pos, tris = merge(quad, _occluder(0.0))
     sc = scene(pos, tris)
     out, _ = stage(sc, cfg(target=target, lights=[sun((0, -1, 0))], face_cell=0.01, face_points_max=64))
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     # exact lit fractions (x > 0) of the two floor triangles
     p = pos[tris[:2]]
     lit = []
@@ -66,13 +66,13 @@ def test_subdivision_goes_where_light_varies_within_budget():
     # UVs are carried exactly (uv = (x, z) stays true on every new corner)
     np.testing.assert_allclose(out.tri_uvs, tp[:, :, [0, 2]], atol=1e-12)
     # better area average of the light over the floor than without subdivision
-    res = out.artefacts["lighting"]
+    res = out.artefacts.lighting
     area = 0.5 * np.linalg.norm(np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0]), axis=1)
     on_floor = tp[:, :, 1].max(axis=1) < 0.5
     exact = 0.9 * 2.0  # lit area of the floor: x in [0.1, 1], z in [-1, 1]
     got = float((area * res.face["direct"][:, 0])[on_floor].sum())
     out0, _ = stage(sc, cfg(lights=[sun((0, -1, 0))], face_cell=10.0))
-    r0 = out0.artefacts["lighting"]
+    r0 = out0.artefacts.lighting
     tp0 = sc.positions[sc.triangles]
     a0 = 0.5 * np.linalg.norm(np.cross(tp0[:, 1] - tp0[:, 0], tp0[:, 2] - tp0[:, 0]), axis=1)
     got0 = float((a0 * r0.face["direct"][:, 0])[:nfloor].sum())

@@ -104,8 +104,8 @@ def ao_from_colour(rgb: np.ndarray, albedo=FLOOR) -> np.ndarray:
 
 def lightmap_at(scene, tri: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """Bilinear lookups of the baked lightmap (RGB in [0, 1]) at points of the given triangles."""
-    img = scene.artefacts["lightmap_image"][..., :3] / 255.0
-    uvs = scene.artefacts["lightmap"].atlas.tri_uvs[tri]  # (n, 3, 2)
+    img = scene.artefacts.lightmap_image[..., :3] / 255.0
+    uvs = scene.artefacts.lightmap.atlas.tri_uvs[tri]  # (n, 3, 2)
     p = scene.positions[scene.triangles[tri]]  # (n, 3, 3)
     e1, e2, w = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], xyz - p[:, 0]
     # barycentrics in the floor plane (x, z)
@@ -140,7 +140,7 @@ def test_lone_floor_is_its_material_colour_in_both_targets(tmp_path):
     want = np.rint(np.array(FLOOR) * 255)  # decode then encode: the colour itself
     lm, rec = lighting_stage.stage(scene, ao_config("lightmap", samples=16))
     assert "AO is the only effect: ambient taken as white [1, 1, 1]" in rec.details["notes"]
-    img = lm.artefacts["lightmap_image"][..., :3].astype(float)
+    img = lm.artefacts.lightmap_image[..., :3].astype(float)
     covered = img.sum(axis=2) > 0  # covered and padding texels (the rest stay black)
     assert covered.mean() > 0.3
     assert np.abs(img[covered] - want).max() <= 1, np.unique(img[covered].reshape(-1, 3), axis=0)[:4]
@@ -164,7 +164,7 @@ def test_triangle_target_matches_brute_force_ao(baked):
     """Each small floor triangle's colour is AO at its centroid (one interior point): within Z
     standard errors (the bake's own, conservative, plus the reference's) of the reference, and
     unbiased over all of them."""
-    res = baked["tri"].artefacts["lighting"]
+    res = baked["tri"].artefacts.lighting
     f = baked["floor"]
     assert np.all(res.face_sampled[f])
     got = ao_from_colour(baked["tri"].face_colors[f, :3])
@@ -204,14 +204,14 @@ def test_lightmap_keeps_vertex_colours_and_a_lit_scene_rebakes_the_same(tmp_path
     scene = with_atlas(floor_and_box(box=False, vertex_colors=vc), tmp_path)
     cfg = ao_config("lightmap", samples=4)
     lm, _ = lighting_stage.stage(scene, cfg)
-    img = lm.artefacts["lightmap_image"][..., :3].astype(float)
+    img = lm.artefacts.lightmap_image[..., :3].astype(float)
     covered = img.sum(axis=2) > 0
     want = np.rint(np.array(FLOOR) * np.array(vc) * 255)
     assert np.abs(img[covered] - want).max() <= 1
     again, _ = bake_lightmap(lm.replace(lists={}), cfg)
-    np.testing.assert_array_equal(again.artefacts["lightmap_image"], lm.artefacts["lightmap_image"])
+    np.testing.assert_array_equal(again.artefacts.lightmap_image, lm.artefacts.lightmap_image)
     # linear in, linear out: the same light with colour_space = "linear"
     lin = dataclasses.replace(cfg, color_space="linear")
     out, _ = lighting_stage.stage(scene, lin)
-    img = out.artefacts["lightmap_image"][..., :3].astype(float)
+    img = out.artefacts.lightmap_image[..., :3].astype(float)
     assert np.abs(img[covered] - want).max() <= 1

@@ -47,7 +47,7 @@ def bake_to(model: Path, out: Path, sections: dict) -> Path:
     data = {"input": {"path": str(model)}, **sections}
     res = pipeline.run(config.load(data=data))
     out.mkdir(parents=True, exist_ok=True)
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     name = next(n for n in files if n.endswith(".sb3"))
     (out / name).write_bytes(files[name])
     return out / name

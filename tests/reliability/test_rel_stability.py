@@ -350,7 +350,7 @@ def check_bvh(ref: Bake, got: Bake) -> None:
                  c + rng.uniform(-0.3, 0.3, (2000, 3)) * d)
     dr = target - o
     dr /= np.linalg.norm(dr, axis=1, keepdims=True)
-    enc_ref, enc_got = ref.scene.artefacts["bvh"]["encoded"], got.scene.artefacts["bvh"]["encoded"]
+    enc_ref, enc_got = ref.scene.artefacts.bvh["encoded"], got.scene.artefacts.bvh["encoded"]
     h_ref = trace(enc_ref, o, dr)
     s = got.sim
     h_got = trace(enc_got, s.apply(o), s.direction(dr))
@@ -377,7 +377,7 @@ def check_bvh(ref: Bake, got: Bake) -> None:
 
 
 def _irr(b: Bake) -> tuple[np.ndarray, np.ndarray]:
-    lr = b.scene.artefacts["lighting"]
+    lr = b.scene.artefacts.lighting
     se2 = sum(v ** 2 for v in lr.vertex_se.values())
     return np.asarray(lr.vertex_irradiance), np.sqrt(se2)
 
@@ -406,7 +406,7 @@ def check_lightmap(ref: Bake, got: Bake) -> None:
     from bake.textures.lightmap import bilinear
 
     assert got.scene.n_triangles == ref.scene.n_triangles
-    ia, ib = ref.scene.artefacts["lightmap_image"], got.scene.artefacts["lightmap_image"]
+    ia, ib = ref.scene.artefacts.lightmap_image, got.scene.artefacts.lightmap_image
     ua, ub = ref.scene.tri_lightmap_uvs, got.scene.tri_lightmap_uvs
     assert ua is not None and ub is not None
     ca = bilinear(ia[:, :, :3].astype(np.float64) / 255.0, ua.mean(axis=1))

@@ -78,7 +78,7 @@ def baked(tmp_path_factory, vm):
         sections.setdefault("export", {}).update({"pack": True})
         sections.setdefault("textures", {}).setdefault("lightmap", {}).setdefault("cache_dir", str(tmp / "xatlas"))
         res = bake(model, **sections)
-        files = res.scene.artefacts["outputs"]
+        files = res.scene.artefacts.outputs
         plain = json.loads(files["lists.json"])["lists"]
         stem = next(n for n in files if n.endswith(".sb3"))
         f = tmp / f"{name}.sb3"
@@ -207,7 +207,7 @@ def test_sprite3_unpacks_its_own_lists(baked, vm, tmp_path):
     """The .sprite3 (lists local to the sprite, for Upload Sprite) carries the loader too."""
     model = corpus_path("cornell_box_tinyobj", "cornell_box.obj")
     res = bake(model, bsp={"enabled": True}, export={"pack": True})
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     plain = json.loads(files["lists.json"])["lists"]
     sprite = next(n for n in files if n.endswith(".sprite3"))
     f = tmp_path / "c.sprite3"
@@ -230,7 +230,7 @@ def test_green_flag_draws_the_same_picture_packed_and_plain(vm, tmp_path):
     strokes = []
     for pack in (False, True):
         res = bake(model, bsp={"enabled": True}, export={"pack": pack})
-        files = res.scene.artefacts["outputs"]
+        files = res.scene.artefacts.outputs
         f = tmp_path / f"g{int(pack)}.sb3"
         f.write_bytes(files[next(n for n in files if n.endswith(".sb3"))])
         out = vm({"load": str(f), "runs": [{"greenFlag": True, "pen": True}]})

@@ -46,7 +46,7 @@ def walks(tmp_path_factory, vm):
     cases, jobs = [], []
     for name in MODELS:
         res = bake(_path(name, tmp), bsp={"enabled": True})
-        files = res.scene.artefacts["outputs"]
+        files = res.scene.artefacts.outputs
         stem = next(n for n in files if n.endswith(".sb3"))
         p = tmp / f"{name}.sb3"
         p.write_bytes(files[stem])

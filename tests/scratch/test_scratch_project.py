@@ -125,7 +125,7 @@ def test_reader_off_and_reader_needing_the_stage(tmp_path):
 
     model = corpus_path("cube_quads_mtl", "cube.obj")
     res = bake(model, export={"reader": False})
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     project, _ = sb3.load_project(files["cube.sb3"])
     assert project["targets"][1]["blocks"] == {} and project["extensions"] == []
     sprite, _ = sb3.load_sprite(files["cube.sprite3"])
@@ -137,7 +137,7 @@ def test_reader_off_and_reader_needing_the_stage(tmp_path):
     res = bake(model, export={"into": str(engine), "into_target": "Hero", "into_reader": True})
     export = next(r for r in res.records if r.name == "export")
     assert any("into_reader" in w for w in export.warnings)
-    project, _ = sb3.load_project(res.scene.artefacts["outputs"]["e-cube.sb3"])
+    project, _ = sb3.load_project(res.scene.artefacts.outputs["e-cube.sb3"])
     assert [t["name"] for t in project["targets"]] == ["Stage", "Hero"]
     assert {v[0] for v in project["targets"][1]["lists"].values()} == {"verts", "tris", "mat colors"}
     assert engine.resolve() in [p.resolve() for p in res.scene.source.files_read]
@@ -153,7 +153,7 @@ def test_turbowarp_fencing_setting_only_in_the_fresh_project(tmp_path):
     model = corpus_path("cube_quads_mtl", "cube.obj")
     engine = _engine(tmp_path / "engine.sb3")
     res = bake(model, export={"into": str(engine)})
-    files = res.scene.artefacts["outputs"]
+    files = res.scene.artefacts.outputs
     project, _ = sb3.load_project(files["cube.sb3"])
     stage = project["targets"][0]
     assert sb3.turbowarp_settings(stage["comments"]) == {"runtimeOptions": {"fencing": False}}
@@ -166,5 +166,5 @@ def test_turbowarp_fencing_setting_only_in_the_fresh_project(tmp_path):
     merged, _ = sb3.load_project(files["engine-cube.sb3"])
     assert all(sb3.turbowarp_settings(t.get("comments") or {}) is None for t in merged["targets"])
     res = bake(model, export={"turbowarp_fencing": True})
-    project, _ = sb3.load_project(res.scene.artefacts["outputs"]["cube.sb3"])
+    project, _ = sb3.load_project(res.scene.artefacts.outputs["cube.sb3"])
     assert project["targets"][0]["comments"] == {}

@@ -130,7 +130,7 @@ def test_encodings_decode_back_and_sizes_are_real(fmt, first_row, alpha, tmp_pat
     scene = textured_scene(img, with_vc=False)
     cfg = TexturesConfig(enabled=True, max_size=16, filter="box", color_format=fmt, first_row=first_row)
     out, rec = tstage.stage(scene, cfg)
-    ts = out.artefacts["textures"]
+    ts = out.artefacts.textures
     res = ts.textures[0].image
     assert res.shape == (16, 16, 4)
     # colour list, read like Scratch's pen reads it
@@ -146,14 +146,14 @@ def test_encodings_decode_back_and_sizes_are_real(fmt, first_row, alpha, tmp_pat
     dec = textimage.decode(txt.values[0], channels=4)
     assert np.array_equal(dec if alpha else dec[:, :, :3], res if alpha else res[:, :, :3])
     # PNG costume
-    (name, data), = out.artefacts["costumes"]
+    (name, data), = out.artefacts.costumes
     assert name == "tex wood"
     pimg = np.asarray(Image.open(io.BytesIO(data)).convert("RGBA"))
     assert np.array_equal(pimg, res)
     # the record's sizes = what export writes
     enc = rec.details["textures"][0]["encodings"]
     ex, _ = export_stage(out, config_mod.ExportConfig(sb3=False, sprite3=False))
-    info = ex.artefacts["list_info"]
+    info = ex.artefacts.list_info
     assert enc["list"]["project_json_bytes"] == info["tex wood"]["project_json_bytes"] + \
         info["tex wood size"]["project_json_bytes"]
     assert enc["list"]["items"] == 16 * 16 + 2
@@ -188,9 +188,9 @@ def test_resampling_options():
                      ({"max_size": 20, "power_of_two": "floor"}, (16, 16)),
                      ({"width": 12, "power_of_two": "ceil"}, (16, 16))):
         out, _ = tstage.stage(scene, TexturesConfig(enabled=True, encodings=["list"], **kw))
-        assert out.artefacts["textures"].textures[0].image.shape[:2] == size, kw
+        assert out.artefacts.textures.textures[0].image.shape[:2] == size, kw
     out, _ = tstage.stage(scene, TexturesConfig(enabled=True, max_size=7, filter="nearest"))
-    res = out.artefacts["textures"].textures[0].image
+    res = out.artefacts.textures.textures[0].image
     src = {tuple(c) for c in img.reshape(-1, 4).tolist()}
     assert all(tuple(c) in src for c in res.reshape(-1, 4).tolist())  # nearest: exact source colours
 
@@ -198,7 +198,7 @@ def test_resampling_options():
 def test_only_requested_encodings_are_written_but_all_are_compared():
     scene = textured_scene(checker(8))
     out, rec = tstage.stage(scene, TexturesConfig(enabled=True, encodings=["textimage"]))
-    assert set(out.lists) == {"tex wood textimage"} and "costumes" not in out.artefacts
+    assert set(out.lists) == {"tex wood textimage"} and out.artefacts.costumes is None
     enc = rec.details["textures"][0]["encodings"]
     assert set(enc) == {"list", "textimage", "costume"}
     assert enc["list"]["written"].startswith("not requested") and enc["textimage"]["written"] == "written"
@@ -231,7 +231,7 @@ def test_deterministic_bytes():
     cfg = TexturesConfig(enabled=True, color_format="argb")
     a, ra = tstage.stage(s, cfg)
     b, rb = tstage.stage(s, cfg)
-    assert a.artefacts["costumes"] == b.artefacts["costumes"]
+    assert a.artefacts.costumes == b.artefacts.costumes
     for k in a.lists:
         va, vb = a.lists[k].values, b.lists[k].values
         assert (va == vb) if isinstance(va, tuple) else np.array_equal(va, vb)
@@ -257,7 +257,7 @@ def test_lighting_uses_textured_albedo_also_after_subdividing():
                            subdivide_threshold=0.02, face_cell=0.05)
     lit, _ = lighting_stage.stage(out, light)
     assert lit.n_triangles > scene.n_triangles  # it did split
-    res = lit.artefacts["lighting"]
+    res = lit.artefacts.lighting
     exact = np.array([brute_mean(img, lit.tri_uvs[t], N=96) for t in range(lit.n_triangles)])
     expect = lighting_color.shade(srgb_to_linear(exact[:, :3]), res.face_irradiance, 1.0, "clamp", "srgb")
     assert np.abs(lit.face_colors[:, :3] - expect).max() < 8e-3
@@ -284,7 +284,7 @@ def test_stage_lightmap_outputs_and_crash(tmp_path, monkeypatch):
     uv = exported.lists["lightmap uvs"]
     assert uv.stride == 6 and len(uv.values) == 6 * scene.n_triangles
     assert np.array_equal(np.asarray(uv.values).reshape(-1, 3, 2), out.tri_lightmap_uvs)
-    job = out.artefacts["lightmap"]
+    job = out.artefacts.lightmap
     assert isinstance(job, lightmap.LightmapJob) and job.atlas.n_triangles == scene.n_triangles
     assert rec.details["lightmap"]["triangles_without_samples"] == 0
     out.validate()
@@ -384,9 +384,9 @@ def test_bake_lightmap_target_end_to_end(tmp_path):
     final, rec = lighting_stage.stage(out, light)
     figs = rec.details["lightmap"]
     assert [e for e in rec.effects if e["name"] == "lightmap"][0]["rays"] > 0
-    img = final.artefacts["lightmap_image"]
+    img = final.artefacts.lightmap_image
     H, W = img.shape[:2]
-    atlas = out.artefacts["lightmap"].atlas
+    atlas = out.artefacts.lightmap.atlas
     _, texels = lightmap.cover(atlas)
     covered = lightmap.texel_mask(texels, np.ones(len(texels)), atlas)
     assert covered.sum() > 0.3 * W * H
@@ -430,7 +430,7 @@ def test_textured_corpus_bakes_to_every_encoding(name, file, texture, tmp_path):
     assert len(rec.details["size_table"]) == 3 * len(rec.details["textures"])
     # export writes it all into a valid project
     ex, _ = export_stage(out, config_mod.ExportConfig(sprite3=False))
-    files = ex.artefacts["outputs"]
+    files = ex.artefacts.outputs
     blob = next(v for k, v in files.items() if k.endswith(".sb3"))
     p = tmp_path / "m.sb3"
     p.write_bytes(blob)

@@ -19,6 +19,9 @@ def main(target: str) -> None:
 
     with atheris.instrument_imports(include=["bake"]):
         import bake.importers.obj  # noqa: F401
+        import bake.importers.obj_lines  # noqa: F401
+        import bake.importers.obj_parse  # noqa: F401
+        import bake.importers.mtl  # noqa: F401
         import bake.importers.gltf  # noqa: F401
         import bake.importers.gltf_data  # noqa: F401
         import bake.scratch.sb3  # noqa: F401

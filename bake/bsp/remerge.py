@@ -71,118 +71,163 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
     bucket = np.unique(key, axis=0, return_inverse=True)[1].ravel()
     deg = store.degenerate_of(ids)
     lonely = np.bincount(bucket)[bucket] < 2
-    # working copies of every fragment (members: which original entries each stands for)
-    F = len(ids)
-    K = store.K
-    pos = store.pos[ids].copy()
-    attr = store.attr[ids].copy()
-    vid = store.vid[ids].copy()
-    cnt = store.count[ids].copy()
-    src = store.src[ids].copy()
-    plane = store.planes_of(ids)
-    place = seq.copy()
-    member = np.arange(F)  # entry -> working fragment
-    alive = ~deg & ~lonely
-    merged_any = np.zeros(F, bool)
-    q = 1e9
+    w = _Working(store, ids, seq, alive=~deg & ~lonely)
     for _ in range(rounds):
-        w = np.flatnonzero(alive)
-        if len(w) < 2:
+        if not _join_round(w, bucket, eps, min_area, shown):
             break
-        k = np.arange(K)[None, :]
-        valid = k < cnt[w][:, None]
-        nxt = (k + 1) % cnt[w][:, None]
-        pid = np.round(pos[w] * q).astype(np.int64)
-        _, pid = np.unique(pid.reshape(-1, 3), axis=0, return_inverse=True)
-        pid = pid.reshape(len(w), K)
-        a, b = pid, np.take_along_axis(pid, nxt, 1)
-        fw = np.broadcast_to(np.arange(len(w))[:, None], a.shape)
-        kk = np.broadcast_to(k, a.shape)
-        e_f, e_k, e_a, e_b = fw[valid], kk[valid], a[valid], b[valid]
-        e_u = bucket[w][e_f]
-        lo, hi = np.minimum(e_a, e_b), np.maximum(e_a, e_b)
-        o = np.lexsort((hi, lo, e_u))
-        lo, hi, e_u, e_f, e_k, e_a = lo[o], hi[o], e_u[o], e_f[o], e_k[o], e_a[o]
-        same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1]) & (e_u[1:] == e_u[:-1])
-        first = np.flatnonzero(same)
-        if len(first) == 0:
-            break
-        pair_ok = ~np.isin(first + 1, first) & ~np.isin(first - 1, first)
-        i, j = first[pair_ok], first[pair_ok] + 1
-        ok = (e_f[i] != e_f[j]) & (e_a[i] != e_a[j])
-        i, j = i[ok], j[ok]
-        if len(i) == 0:
-            break
-        fp, fq = w[e_f[i]], w[e_f[j]]
-        kp, kq = e_k[i], e_k[j]
-        n = plane[fp, :3]
-        # coplanar within the tolerance, both ways
-        dq = np.abs(np.einsum("fkc,fc->fk", pos[fq], plane[fp, :3]) - plane[fp, 3:4]).max(1)
-        dp = np.abs(np.einsum("fkc,fc->fk", pos[fp], plane[fq, :3]) - plane[fq, 3:4]).max(1)
-        ok = (dq <= eps) & (dp <= eps) & (np.einsum("ij,ij->i", plane[fp, :3], plane[fq, :3]) > 0.999)
-        # joint corners: p's edge kp is A->B, q's edge kq is B->A
-        cp, cq = cnt[fp], cnt[fq]
-        A_ = pos[fp, kp]
-        B_ = pos[fp, (kp + 1) % cp]
-        ta = _turn_ok(n, pos[fp, (kp - 1) % cp], A_, pos[fq, (kq + 2) % cq], eps)
-        tb = _turn_ok(n, pos[fq, (kq - 1) % cq], B_, pos[fp, (kp + 2) % cp], eps)
-        ok &= (ta > 0) & (tb > 0) & ((ta == 2) | (tb == 2))  # convex, and at least one corner goes
-        seen = attr if shown is None else attr[..., shown]
-        if seen.shape[2]:
-            ok &= _affine_ok(pos, seen, cnt, plane, fp, fq, 1e-6)
-        fp, fq, kp, kq, ta, tb = fp[ok], fq[ok], kp[ok], kq[ok], ta[ok], tb[ok]
-        if len(fp) == 0:
-            break
-        # one joint per fragment per round: each proposes its longest joinable edge; mutual ones join
-        mutual = mutual_proposals(pos, cnt, fp, kp, fq, F)
-        fp, fq, kp, kq, ta, tb = fp[mutual], fq[mutual], kp[mutual], kq[mutual], ta[mutual], tb[mutual]
-        if len(fp) == 0:
-            break
-        # the union loop: p from B round to A (cp corners), then q after A up to before B
-        cp, cq = cnt[fp], cnt[fq]
-        newc = cp + cq - 2
-        K2 = max(K, int(newc.max()))
-        if K2 > K:
-            pad = K2 - K
-            pos = np.concatenate([pos, np.repeat(pos[:, :1], pad, 1)], 1)
-            attr = np.concatenate([attr, np.repeat(attr[:, :1], pad, 1)], 1)
-            vid = np.concatenate([vid, np.repeat(vid[:, :1], pad, 1)], 1)
-            K = K2
-        t, sf, sk = union_slots(fp, kp, fq, kq, cp, cq, K)
-        # drop the straight joint corners: B is slot 0, A is slot cp - 1
-        drop = ((t == 0) & (tb == 2)[:, None]) | ((t == cp[:, None] - 1) & (ta == 2)[:, None])
-        keep = (t < newc[:, None]) & ~drop
-        newc = keep.sum(1)
-        order = np.argsort(~keep, axis=1, kind="stable")
-        sf = np.take_along_axis(sf, order, 1)
-        sk = np.take_along_axis(sk, order, 1)
-        padm = t >= newc[:, None]
-        sf = np.where(padm, sf[:, :1], sf)
-        sk = np.where(padm, sk[:, :1], sk)
-        P2 = pos[sf, sk]
-        # every fan triangle of the union must face the plane's way, untilted and not collapsed
-        # (a corner just inside the tolerance could make a sliver flip)
-        e1 = P2[:, 1:-1] - P2[:, :1]
-        e2 = P2[:, 2:] - P2[:, :1]
-        tn = np.cross(e1, e2)
-        ln = np.linalg.norm(tn, axis=2)
-        cos = np.einsum("fkc,fc->fk", tn, plane[fp, :3]) / np.maximum(ln, 1e-300)
-        real = np.arange(K - 2)[None, :] < (newc - 2)[:, None]
-        good = ~(real & ((cos < MIN_COS_TILT) | (0.5 * ln <= min_area))).any(1)
-        fp, fq, sf, sk, newc = fp[good], fq[good], sf[good], sk[good], newc[good]
-        if len(fp) == 0:
-            break
-        pos[fp], attr[fp], vid[fp] = pos[sf, sk], attr[sf, sk], vid[sf, sk]
-        cnt[fp] = newc
-        place[fp] = np.maximum(place[fp], place[fq])
-        alive[fq] = False
-        tgt = np.arange(F)
-        tgt[fq] = fp
-        member = tgt[member]
-        merged_any[fp] = True
-    # ---- check the new order of every prefix/suffix list that changed; revert the ones that fail
-    changed_units = np.unique(unit[merged_any[member]])
-    reverted = np.zeros(0, np.int64)
+    bad_units = _failed_units(store, w, unit, kind, eps)
+    reverted = np.flatnonzero(np.isin(unit, bad_units)) if bad_units else np.zeros(0, np.int64)
+    n_new, saved = _write_back(store, tree, w, ids, node, side, kind, seq, reverted)
+    return {"remerged": n_new, "remerge_saved": saved, "remerge_reverted": int(len(bad_units))}
+
+
+class _Working:
+    """Working copies of every fragment of the tree's lists (``member``: the working fragment each
+    original entry now stands for; ``place``: where a fragment is drawn in its list)."""
+
+    def __init__(self, store: FaceStore, ids: np.ndarray, seq: np.ndarray, alive: np.ndarray):
+        self.F = len(ids)
+        self.K = store.K
+        self.pos = store.pos[ids].copy()
+        self.attr = store.attr[ids].copy()
+        self.vid = store.vid[ids].copy()
+        self.cnt = store.count[ids].copy()
+        self.src = store.src[ids].copy()
+        self.plane = store.planes_of(ids)
+        self.place = seq.copy()
+        self.member = np.arange(self.F)  # entry -> working fragment
+        self.alive = alive
+        self.merged_any = np.zeros(self.F, bool)
+
+    def widen(self, K2: int) -> None:
+        """Room for ``K2`` corners per fragment (padded with each fragment's first corner)."""
+        if K2 > self.K:
+            pad = K2 - self.K
+            self.pos = np.concatenate([self.pos, np.repeat(self.pos[:, :1], pad, 1)], 1)
+            self.attr = np.concatenate([self.attr, np.repeat(self.attr[:, :1], pad, 1)], 1)
+            self.vid = np.concatenate([self.vid, np.repeat(self.vid[:, :1], pad, 1)], 1)
+            self.K = K2
+
+
+def _join_round(w: _Working, bucket: np.ndarray, eps: float, min_area: float,
+                shown: np.ndarray | None) -> bool:
+    """One round of joints: pairs of live fragments sharing an edge in one bucket, kept where
+    the union is coplanar, convex, drops a corner and keeps every shown attribute affine; one
+    joint per fragment (mutual proposals); the union's fan must be sound. False when nothing
+    joined (no further round can)."""
+    live = np.flatnonzero(w.alive)
+    if len(live) < 2:
+        return False
+    pairs = _shared_edges(w, live, bucket)
+    if pairs is None:
+        return False
+    fp, fq, kp, kq = pairs
+    pos, cnt, plane = w.pos, w.cnt, w.plane
+    n = plane[fp, :3]
+    # coplanar within the tolerance, both ways
+    dq = np.abs(np.einsum("fkc,fc->fk", pos[fq], plane[fp, :3]) - plane[fp, 3:4]).max(1)
+    dp = np.abs(np.einsum("fkc,fc->fk", pos[fp], plane[fq, :3]) - plane[fq, 3:4]).max(1)
+    ok = (dq <= eps) & (dp <= eps) & (np.einsum("ij,ij->i", plane[fp, :3], plane[fq, :3]) > 0.999)
+    # joint corners: p's edge kp is A->B, q's edge kq is B->A
+    cp, cq = cnt[fp], cnt[fq]
+    A_ = pos[fp, kp]
+    B_ = pos[fp, (kp + 1) % cp]
+    ta = _turn_ok(n, pos[fp, (kp - 1) % cp], A_, pos[fq, (kq + 2) % cq], eps)
+    tb = _turn_ok(n, pos[fq, (kq - 1) % cq], B_, pos[fp, (kp + 2) % cp], eps)
+    ok &= (ta > 0) & (tb > 0) & ((ta == 2) | (tb == 2))  # convex, and at least one corner goes
+    seen = w.attr if shown is None else w.attr[..., shown]
+    if seen.shape[2]:
+        ok &= _affine_ok(pos, seen, cnt, plane, fp, fq, 1e-6)
+    fp, fq, kp, kq, ta, tb = fp[ok], fq[ok], kp[ok], kq[ok], ta[ok], tb[ok]
+    if len(fp) == 0:
+        return False
+    # one joint per fragment per round: each proposes its longest joinable edge; mutual ones join
+    mutual = mutual_proposals(pos, cnt, fp, kp, fq, w.F)
+    fp, fq, kp, kq, ta, tb = fp[mutual], fq[mutual], kp[mutual], kq[mutual], ta[mutual], tb[mutual]
+    if len(fp) == 0:
+        return False
+    fp, fq, sf, sk, newc = _unions(w, fp, fq, kp, kq, ta, tb, min_area)
+    if len(fp) == 0:
+        return False
+    w.pos[fp], w.attr[fp], w.vid[fp] = w.pos[sf, sk], w.attr[sf, sk], w.vid[sf, sk]
+    w.cnt[fp] = newc
+    w.place[fp] = np.maximum(w.place[fp], w.place[fq])
+    w.alive[fq] = False
+    tgt = np.arange(w.F)
+    tgt[fq] = fp
+    w.member = tgt[w.member]
+    w.merged_any[fp] = True
+    return True
+
+
+def _shared_edges(w: _Working, live: np.ndarray, bucket: np.ndarray):
+    """Pairs of live fragments of one bucket that share an edge (its corners the same to 1e-9),
+    run in opposite directions by exactly these two: (fragment p, fragment q, p's edge, q's
+    edge), or None."""
+    K, q = w.K, 1e9
+    k = np.arange(K)[None, :]
+    valid = k < w.cnt[live][:, None]
+    nxt = (k + 1) % w.cnt[live][:, None]
+    pid = np.round(w.pos[live] * q).astype(np.int64)
+    _, pid = np.unique(pid.reshape(-1, 3), axis=0, return_inverse=True)
+    pid = pid.reshape(len(live), K)
+    a, b = pid, np.take_along_axis(pid, nxt, 1)
+    fw = np.broadcast_to(np.arange(len(live))[:, None], a.shape)
+    kk = np.broadcast_to(k, a.shape)
+    e_f, e_k, e_a, e_b = fw[valid], kk[valid], a[valid], b[valid]
+    e_u = bucket[live][e_f]
+    lo, hi = np.minimum(e_a, e_b), np.maximum(e_a, e_b)
+    o = np.lexsort((hi, lo, e_u))
+    lo, hi, e_u, e_f, e_k, e_a = lo[o], hi[o], e_u[o], e_f[o], e_k[o], e_a[o]
+    same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1]) & (e_u[1:] == e_u[:-1])
+    first = np.flatnonzero(same)
+    if len(first) == 0:
+        return None
+    pair_ok = ~np.isin(first + 1, first) & ~np.isin(first - 1, first)
+    i, j = first[pair_ok], first[pair_ok] + 1
+    ok = (e_f[i] != e_f[j]) & (e_a[i] != e_a[j])
+    i, j = i[ok], j[ok]
+    if len(i) == 0:
+        return None
+    return live[e_f[i]], live[e_f[j]], e_k[i], e_k[j]
+
+
+def _unions(w: _Working, fp, fq, kp, kq, ta, tb, min_area: float):
+    """The union loops of the joints (straight joint corners dropped) whose fan triangles all face
+    the plane's way, untilted and not collapsed: (p, q, slot fragment, slot corner, corners)."""
+    # the union loop: p from B round to A (cp corners), then q after A up to before B
+    cp, cq = w.cnt[fp], w.cnt[fq]
+    newc = cp + cq - 2
+    w.widen(max(w.K, int(newc.max())))
+    K = w.K
+    t, sf, sk = union_slots(fp, kp, fq, kq, cp, cq, K)
+    # drop the straight joint corners: B is slot 0, A is slot cp - 1
+    drop = ((t == 0) & (tb == 2)[:, None]) | ((t == cp[:, None] - 1) & (ta == 2)[:, None])
+    keep = (t < newc[:, None]) & ~drop
+    newc = keep.sum(1)
+    order = np.argsort(~keep, axis=1, kind="stable")
+    sf = np.take_along_axis(sf, order, 1)
+    sk = np.take_along_axis(sk, order, 1)
+    padm = t >= newc[:, None]
+    sf = np.where(padm, sf[:, :1], sf)
+    sk = np.where(padm, sk[:, :1], sk)
+    P2 = w.pos[sf, sk]
+    # every fan triangle of the union must face the plane's way, untilted and not collapsed
+    # (a corner just inside the tolerance could make a sliver flip)
+    e1 = P2[:, 1:-1] - P2[:, :1]
+    e2 = P2[:, 2:] - P2[:, :1]
+    tn = np.cross(e1, e2)
+    ln = np.linalg.norm(tn, axis=2)
+    cos = np.einsum("fkc,fc->fk", tn, w.plane[fp, :3]) / np.maximum(ln, 1e-300)
+    real = np.arange(K - 2)[None, :] < (newc - 2)[:, None]
+    good = ~(real & ((cos < MIN_COS_TILT) | (0.5 * ln <= min_area))).any(1)
+    return fp[good], fq[good], sf[good], sk[good], newc[good]
+
+
+def _failed_units(store: FaceStore, w: _Working, unit: np.ndarray, kind: np.ndarray, eps: float) -> list:
+    """The prefix/suffix lists (units) that changed and whose new order fails the "may hide"
+    check, or are too long to check (they are reverted)."""
+    changed_units = np.unique(unit[w.merged_any[w.member]])
     bad_units = []
     for u in changed_units:
         e = np.flatnonzero(unit == u)
@@ -191,18 +236,23 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
         if len(e) > CHECK_MAX:
             bad_units.append(u)
             continue
-        frag = np.unique(member[e])
-        frag = frag[np.argsort(place[frag], kind="stable")]
+        frag = np.unique(w.member[e])
+        frag = frag[np.argsort(w.place[frag], kind="stable")]
         # the new fragments, temporarily in the store, in draw order
-        tmp = store.append(pos[frag], attr[frag], vid[frag], cnt[frag], src[frag])
+        tmp = store.append(w.pos[frag], w.attr[frag], w.vid[frag], w.cnt[frag], w.src[frag])
         M = hide_graph(store, tmp[None], eps)[0]
         store.n -= len(tmp)
         if np.triu(M, 1).any():
             bad_units.append(u)
-    if bad_units:
-        bad = np.isin(unit, bad_units)
-        reverted = np.flatnonzero(bad)
-    # ---- write back: every entry's working fragment; merged ones appended to the store
+    return bad_units
+
+
+def _write_back(store: FaceStore, tree: Tree, w: _Working, ids, node, side, kind, seq,
+                reverted: np.ndarray) -> tuple[int, int]:
+    """Every entry's working fragment (merged ones appended to the store; the ``reverted``
+    entries their original fragment) into the tree's lists, in draw order. Returns (fragments
+    appended, triangles saved)."""
+    F, member, place, merged_any = w.F, w.member, w.place, w.merged_any
     final = member.copy()
     final[reverted] = -1 - reverted  # stays the original fragment
     out_ids = np.empty(F, np.int64)
@@ -213,7 +263,7 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
     out_ids[single] = ids[final[single]]
     # one output entry per working fragment: the entry at the fragment's place
     wf = np.unique(final[changed])
-    new_ids = store.append(pos[wf], attr[wf], vid[wf], cnt[wf], src[wf])
+    new_ids = store.append(w.pos[wf], w.attr[wf], w.vid[wf], w.cnt[wf], w.src[wf])
     lookup = np.full(F, -1, np.int64)
     lookup[wf] = new_ids
     out_ids[changed] = lookup[final[changed]]
@@ -232,4 +282,4 @@ def remerge(store: FaceStore, tree: Tree, src_group: np.ndarray, eps: float, min
     tree.on_ids, tree.on_node, tree.on_side = res[0][0], res[0][1], res[0][2].astype(np.int8)
     tree.pre_ids, tree.pre_node = res[1][0], res[1][1]
     tree.suf_ids, tree.suf_node = res[2][0], res[2][1]
-    return {"remerged": int(len(wf)), "remerge_saved": saved, "remerge_reverted": int(len(bad_units))}
+    return int(len(wf)), saved

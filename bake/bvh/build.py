@@ -18,6 +18,8 @@ Conventions
 
 from __future__ import annotations
 
+import heapq
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -439,70 +441,178 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget: flo
     a count, not a time, so the same tree comes out on a busy machine and a quiet one (a time limit
     made bakes differ under load); ``info["reinsertion_visits"]`` says how many were used.
     """
-    import heapq
-    import math
-
     if bvh.n_nodes < 5:
         return bvh
-    work = {"visits": 0}
-    L = bvh.left.tolist()
-    Rg = bvh.right.tolist()
-    P = bvh.parents().tolist()
-    lo = bvh.lo.tolist()
-    hi = bvh.hi.tolist()
-    state = {"root": 0, "total": 0.0}
-    journal: dict[int, tuple] | None = None
+    t = _Tree(bvh)
+    moves = undone = 0
+    inner = [i for i in range(len(t.L)) if t.L[i] >= 0]
+    for _pass in range(passes):
+        if t.visits > budget:
+            break
+        cand = t.ranked(inner, mode)
+        k = max(1, int(len(cand) * fraction))
+        for _, i in cand[:k]:
+            if t.visits > budget:
+                break
+            kept = t.move_subtree(i) if mode == "subtree" else t.move_children(i)
+            if kept is None:  # the root or (moving children) a child of it: nothing to move
+                continue
+            if kept:
+                moves += 1
+            else:
+                undone += 1
+    out = BVH(lo=np.array(t.lo), hi=np.array(t.hi), left=np.array(t.L, np.int64),
+              right=np.array(t.Rg, np.int64), first=bvh.first.copy(), count=bvh.count.copy(),
+              order=bvh.order, info=dict(bvh.info))
+    if t.root != 0:
+        out = _reroot(out, t.root)
+    refit_counts(out)
+    out = preorder(out)
+    out.info["reinsertions"] = moves
+    out.info["reinsertions_undone"] = undone
+    out.info["reinsertion_visits"] = t.visits
+    out.info["reinsertion_budget_reached"] = t.visits > budget
+    return out
 
-    def area_box(a, b):
-        ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-        return ex * ey + ey * ez + ez * ex
 
-    def touch(i):
-        if journal is not None and i >= 0 and i not in journal:
-            journal[i] = (L[i], Rg[i], P[i], lo[i], hi[i])
+def _area_box(a, b):
+    """Half the surface area of the box from ``a`` to ``b`` (3 floats each)."""
+    ex, ey, ez = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    return ex * ey + ey * ez + ez * ex
 
-    def union_area(i, blo, bhi):
-        a, b = lo[i], hi[i]
-        x0 = a[0] if a[0] < blo[0] else blo[0]
-        y0 = a[1] if a[1] < blo[1] else blo[1]
-        z0 = a[2] if a[2] < blo[2] else blo[2]
-        x1 = b[0] if b[0] > bhi[0] else bhi[0]
-        y1 = b[1] if b[1] > bhi[1] else bhi[1]
-        z1 = b[2] if b[2] > bhi[2] else bhi[2]
-        ex, ey, ez = x1 - x0, y1 - y0, z1 - z0
-        return ex * ey + ey * ez + ez * ex
 
-    def refit(i):
-        while i >= 0:
-            work["visits"] += 1
-            touch(i)
-            a, b = L[i], Rg[i]
-            la, lb, ha, hb = lo[a], lo[b], hi[a], hi[b]
-            old = area_box(lo[i], hi[i])
-            lo[i] = [min(la[0], lb[0]), min(la[1], lb[1]), min(la[2], lb[2])]
-            hi[i] = [max(ha[0], hb[0]), max(ha[1], hb[1]), max(ha[2], hb[2])]
-            state["total"] += area_box(lo[i], hi[i]) - old
-            i = P[i]
+def _union_area(a, b, blo, bhi):
+    """:func:`_area_box` of the box ``a``..``b`` grown to hold ``blo``..``bhi``."""
+    x0 = a[0] if a[0] < blo[0] else blo[0]
+    y0 = a[1] if a[1] < blo[1] else blo[1]
+    z0 = a[2] if a[2] < blo[2] else blo[2]
+    x1 = b[0] if b[0] > bhi[0] else bhi[0]
+    y1 = b[1] if b[1] > bhi[1] else bhi[1]
+    z1 = b[2] if b[2] > bhi[2] else bhi[2]
+    ex, ey, ez = x1 - x0, y1 - y0, z1 - z0
+    return ex * ey + ey * ez + ez * ex
 
-    def settle(saved) -> bool:
+
+class _Tree:
+    """The tree :func:`reinsertion` edits, as Python lists (a move touches a handful of nodes, where
+    numpy calls per node would cost more): children ``L``/``Rg``, parents ``P``, boxes ``lo``/``hi``,
+    the ``root``, the interior surface area ``total`` (the SAH cost the moves lower), and the
+    ``visits`` the budget counts. During a move, ``journal`` holds every touched node's state before
+    it, so the move can be undone."""
+
+    def __init__(self, bvh: BVH):
+        self.L = bvh.left.tolist()
+        self.Rg = bvh.right.tolist()
+        self.P = bvh.parents().tolist()
+        self.lo = bvh.lo.tolist()
+        self.hi = bvh.hi.tolist()
+        self.root = 0
+        self.total = 0.0
+        self.visits = 0
+        self.journal: dict[int, tuple] | None = None
+
+    def ranked(self, inner: list[int], mode: str) -> list[tuple[float, int]]:
+        """This pass's candidates, best first: (minus the score, node). ``children``: the interior
+        nodes below the root's children by Bittner's M_sum * M_min * M_area; ``subtree``: every node
+        but the root by its area."""
+        L, Rg, P, lo, hi = self.L, self.Rg, self.P, self.lo, self.hi
+        root = self.root
+        cand = []
+        if mode == "subtree":
+            for i in range(len(L)):
+                if i != root and P[i] >= 0:
+                    cand.append((-_area_box(lo[i], hi[i]), i))
+        for i in (inner if mode == "children" else ()):
+            if i == root or P[i] == root:
+                continue
+            a = _area_box(lo[i], hi[i])
+            al = _area_box(lo[L[i]], hi[L[i]])
+            ar = _area_box(lo[Rg[i]], hi[Rg[i]])
+            m_sum = a / max(0.5 * (al + ar), 1e-300)
+            m_min = a / max(min(al, ar), 1e-300)
+            cand.append((-(m_sum * m_min * a), i))
+        cand.sort()
+        return cand
+
+    # ------------------------------------------------------------------ moves
+    def move_subtree(self, i: int) -> bool | None:
+        """Move the subtree of ``i`` to its best place; None if ``i`` is the root (no move), else
+        whether the move was kept."""
+        if i == self.root or self.P[i] < 0:
+            return None
+        self.journal = {}
+        saved = (self.root, self.total)
+        p_free = self.detach(i)
+        self.attach(i, self.best_place(i), p_free)
+        kept = self.settle(saved)
+        self.journal = None
+        return kept
+
+    def move_children(self, i: int) -> bool | None:
+        """Pull ``i`` out (it and its parent become free) and put its children back one by one,
+        the larger first; None if ``i`` is the root or one of its children, else whether the move
+        was kept."""
+        L, Rg, P, lo, hi = self.L, self.Rg, self.P, self.lo, self.hi
+        if i == self.root or P[i] < 0 or P[i] == self.root:
+            return None
+        self.journal = {}
+        saved = (self.root, self.total)
+        a, b = L[i], Rg[i]
+        p_free = self.detach(i)
+        self.touch(a), self.touch(b)
+        self.total -= _area_box(lo[i], hi[i])
+        P[a] = P[b] = -1
+        L[i] = Rg[i] = -1
+        if _area_box(lo[a], hi[a]) < _area_box(lo[b], hi[b]):
+            a, b = b, a
+        for orphan, free in ((a, p_free), (b, i)):
+            self.attach(orphan, self.best_place(orphan), free)
+        kept = self.settle(saved)
+        self.journal = None
+        return kept
+
+    def settle(self, saved) -> bool:
         """Keep a move that lowered the SAH; otherwise roll every touched node back from the
         journal. True if the move was kept."""
-        if state["total"] >= saved[1] - 1e-12 * abs(saved[1]):
-            for j, (lj, rj, pj, loj, hij) in journal.items():
+        if self.total >= saved[1] - 1e-12 * abs(saved[1]):
+            L, Rg, P, lo, hi = self.L, self.Rg, self.P, self.lo, self.hi
+            for j, (lj, rj, pj, loj, hij) in self.journal.items():
                 L[j], Rg[j], P[j], lo[j], hi[j] = lj, rj, pj, loj, hij
-            state["root"], state["total"] = saved
+            self.root, self.total = saved
             return False
         return True
 
-    def detach(n):
+    # ------------------------------------------------------------------ edits
+    def touch(self, i):
+        """Note node i's state in the journal (the first time in a move)."""
+        journal = self.journal
+        if journal is not None and i >= 0 and i not in journal:
+            journal[i] = (self.L[i], self.Rg[i], self.P[i], self.lo[i], self.hi[i])
+
+    def refit(self, i):
+        """The boxes of i and every node above it made to hold their children again."""
+        L, Rg, P, lo, hi, touch = self.L, self.Rg, self.P, self.lo, self.hi, self.touch
+        while i >= 0:
+            self.visits += 1
+            touch(i)
+            a, b = L[i], Rg[i]
+            la, lb, ha, hb = lo[a], lo[b], hi[a], hi[b]
+            old = _area_box(lo[i], hi[i])
+            lo[i] = [min(la[0], lb[0]), min(la[1], lb[1]), min(la[2], lb[2])]
+            hi[i] = [max(ha[0], hb[0]), max(ha[1], hb[1]), max(ha[2], hb[2])]
+            self.total += _area_box(lo[i], hi[i]) - old
+            i = P[i]
+
+    def detach(self, n):
         """Take n out: its parent is freed and n's sibling takes the parent's place."""
+        L, Rg, P, lo, hi, touch = self.L, self.Rg, self.P, self.lo, self.hi, self.touch
         p = P[n]
         s = Rg[p] if L[p] == n else L[p]
         g = P[p]
         touch(p), touch(s), touch(g), touch(n)
-        state["total"] -= area_box(lo[p], hi[p])
+        self.total -= _area_box(lo[p], hi[p])
         if g < 0:
-            state["root"] = s
+            self.root = s
             P[s] = -1
         else:
             if L[g] == p:
@@ -510,34 +620,40 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget: flo
             else:
                 Rg[g] = s
             P[s] = g
-            refit(g)
+            self.refit(g)
         P[n] = -1
         return p
 
-    def best_place(n):
+    def best_place(self, n):
+        """The node whose place n should share (a new parent over both) for the least added
+        interior area: a branch-and-bound search from the root."""
+        L, Rg, lo, hi = self.L, self.Rg, self.lo, self.hi
         blo, bhi = lo[n], hi[n]
-        an = area_box(blo, bhi)
-        root = state["root"]
+        an = _area_box(blo, bhi)
+        root = self.root
         best_c, best_x = math.inf, root
         heap = [(0.0, root)]
+        visits = 0
         while heap:
             ci, x = heapq.heappop(heap)
-            work["visits"] += 1
+            visits += 1
             if ci + an >= best_c:
                 break
-            ux = union_area(x, blo, bhi)
+            ux = _union_area(lo[x], hi[x], blo, bhi)
             cd = ci + ux
             if cd < best_c:
                 best_c, best_x = cd, x
             if L[x] >= 0:
-                cc = ci + ux - area_box(lo[x], hi[x])
+                cc = ci + ux - _area_box(lo[x], hi[x])
                 if cc + an < best_c:
                     heapq.heappush(heap, (cc, L[x]))
                     heapq.heappush(heap, (cc, Rg[x]))
+        self.visits += visits
         return best_x
 
-    def attach(n, x, p):
+    def attach(self, n, x, p):
         """Make the free node p the parent of x and n, in x's place."""
+        L, Rg, P, lo, hi, touch = self.L, self.Rg, self.P, self.lo, self.hi, self.touch
         g = P[x]
         touch(p), touch(x), touch(n), touch(g)
         L[p], Rg[p] = x, n
@@ -545,84 +661,13 @@ def reinsertion(bvh: BVH, *, passes: int = 4, fraction: float = 0.1, budget: flo
         P[x] = p
         P[n] = p
         if g < 0:
-            state["root"] = p
+            self.root = p
         elif L[g] == x:
             L[g] = p
         else:
             Rg[g] = p
         lo[p], hi[p] = [0.0] * 3, [0.0] * 3  # refit sets it; area 0 -> adds the new area
-        refit(p)
-
-    moves = undone = 0
-    inner = [i for i in range(len(L)) if L[i] >= 0]
-    for _pass in range(passes):
-        if work["visits"] > budget:
-            break
-        root = state["root"]
-        cand = []
-        if mode == "subtree":
-            for i in range(len(L)):
-                if i != root and P[i] >= 0:
-                    cand.append((-area_box(lo[i], hi[i]), i))
-        for i in (inner if mode == "children" else ()):
-            if i == root or P[i] == root:
-                continue
-            a = area_box(lo[i], hi[i])
-            al = area_box(lo[L[i]], hi[L[i]])
-            ar = area_box(lo[Rg[i]], hi[Rg[i]])
-            m_sum = a / max(0.5 * (al + ar), 1e-300)
-            m_min = a / max(min(al, ar), 1e-300)
-            cand.append((-(m_sum * m_min * a), i))
-        cand.sort()
-        k = max(1, int(len(cand) * fraction))
-        for _, i in cand[:k]:
-            if work["visits"] > budget:
-                break
-            root = state["root"]
-            if mode == "subtree":
-                if i == root or P[i] < 0:
-                    continue
-                journal = {}
-                saved = (state["root"], state["total"])
-                p_free = detach(i)
-                attach(i, best_place(i), p_free)
-                if settle(saved):
-                    moves += 1
-                else:
-                    undone += 1
-                journal = None
-                continue
-            if i == root or P[i] < 0 or P[i] == root:
-                continue
-            journal = {}
-            saved = (state["root"], state["total"])
-            a, b = L[i], Rg[i]
-            p_free = detach(i)
-            touch(a), touch(b)
-            state["total"] -= area_box(lo[i], hi[i])
-            P[a] = P[b] = -1
-            L[i] = Rg[i] = -1
-            if area_box(lo[a], hi[a]) < area_box(lo[b], hi[b]):
-                a, b = b, a
-            for orphan, free in ((a, p_free), (b, i)):
-                attach(orphan, best_place(orphan), free)
-            if settle(saved):
-                moves += 1
-            else:
-                undone += 1
-            journal = None
-    out = BVH(lo=np.array(lo), hi=np.array(hi), left=np.array(L, np.int64),
-              right=np.array(Rg, np.int64), first=bvh.first.copy(), count=bvh.count.copy(),
-              order=bvh.order, info=dict(bvh.info))
-    if state["root"] != 0:
-        out = _reroot(out, state["root"])
-    refit_counts(out)
-    out = preorder(out)
-    out.info["reinsertions"] = moves
-    out.info["reinsertions_undone"] = undone
-    out.info["reinsertion_visits"] = work["visits"]
-    out.info["reinsertion_budget_reached"] = work["visits"] > budget
-    return out
+        self.refit(p)
 
 
 def _reroot(bvh: BVH, r: int) -> BVH:

@@ -10,6 +10,9 @@ from . import sb3
 from .blocks import add, and_, div, eq, floor, gt, item, lt, mod, mul, not_, or_, sub, var
 from .textimage import ALPHABET, VOLUMES
 
+# the decoder's lists (declared by textimage_part)
+_OUT, _HDR, _PX, _ALPHA, _TABLE, _VOL = "ti colors", "_ti header", "_ti px", "_ti a", "_ti hash", "_ti volumes"
+
 # Empty costume for the alphabet (2x2 transparent; one asset shared by every costume).
 EMPTY_SVG = sb3.SPRITE_SVG
 
@@ -23,23 +26,34 @@ def alphabet_costumes() -> list[sb3.Costume]:
 
 
 def textimage_part(r) -> None:
+    """The blocks of ``decode textimage (text)``: the character readers, the opcodes of the RGB8
+    and A8 streams, the streams, then the header and the block itself. The lists and variables
+    are declared here first, in the order the sprite keeps them; the parts read them by name."""
     r.alphabet = True
-    s, pos, c = r.v("_ts", ""), r.v("_tp"), r.v("_tc")
-    out = r.lst("ti colors")
-    hdr = r.lst("_ti header")
-    px, alpha = r.lst("_ti px"), r.lst("_ti a")
-    table = r.lst("_ti hash")
+    r.v("_ts", ""), r.v("_tp"), r.v("_tc")
+    for name in (_OUT, _HDR, _PX, _ALPHA, _TABLE):
+        r.lst(name)
     vols: list[int] = []
     for (oy, ou, ov), _dims in VOLUMES:
         vols += [oy, ou, ov]
-    vol = r.lst("_ti volumes", vols)
-    W, H = r.v("ti width"), r.v("ti height")
-    tok, i, k, rest = r.v("_tok", ""), r.v("_ti i"), r.v("_ti k"), r.v("_rest", "")
-    end, cnt, vf = r.v("_tend"), r.v("_tcount"), r.v("_tvf")
-    op2, rn, val = r.v("_top2"), r.v("_trn"), r.v("_tval")
-    R, G, Bv = r.v("_tr"), r.v("_tg"), r.v("_tb")
-    dY, dU, dV, idx = r.v("_tdy"), r.v("_tdu"), r.v("_tdv"), r.v("_tidx")
-    d0, d1, d2 = r.v("_td0"), r.v("_td1"), r.v("_td2")
+    r.lst(_VOL, vols)
+    r.v("ti width"), r.v("ti height")
+    r.v("_tok", ""), r.v("_ti i"), r.v("_ti k"), r.v("_rest", "")
+    r.v("_tend"), r.v("_tcount"), r.v("_tvf")
+    r.v("_top2"), r.v("_trn"), r.v("_tval")
+    r.v("_tr"), r.v("_tg"), r.v("_tb")
+    r.v("_tdy"), r.v("_tdu"), r.v("_tdv"), r.v("_tidx")
+    r.v("_td0"), r.v("_td1"), r.v("_td2")
+    _char_blocks(r)
+    _op_blocks(r)
+    _stream_blocks(r)
+    _decode_block(r)
+
+
+def _char_blocks(r) -> None:
+    """``_ti char`` reads the next character's value into ``_tc``; ``_ti rest (s)`` puts the rest
+    of a header token into ``_rest``."""
+    s, pos, rest = var("_ts"), var("_tp"), var("_rest")
 
     # one character -> its value 0..93 (case-sensitive: costume names)
     r.define("_ti char", [], [
@@ -53,6 +67,16 @@ def textimage_part(r) -> None:
         B.repeat(sub(B.length_of(B.arg("s")), 2), [
             r.set("_rest", B.join(rest, B.letter_of(var("_ti j"), B.arg("s")))), r.change("_ti j", 1)]),
     ])
+
+
+def _op_blocks(r) -> None:
+    """``_ti emit (c)`` adds a pixel; ``_ti rgb op (op)`` and ``_ti a8 op (op)`` decode one opcode
+    of an RGB8 or A8 stream."""
+    px, alpha, table, vol = _PX, _ALPHA, _TABLE, _VOL
+    W, end, vf, val, c = var("ti width"), var("_tend"), var("_tvf"), var("_tval"), var("_tc")
+    R, G, Bv = var("_tr"), var("_tg"), var("_tb")
+    dY, dU, dV, idx = var("_tdy"), var("_tdu"), var("_tdv"), var("_tidx")
+    d0, d1, d2 = var("_td0"), var("_td1"), var("_td2")
 
     def prev(kexpr, lst: str) -> B.Node:
         """value emitted kexpr pixels ago (0 before the start) -> _tval"""
@@ -124,6 +148,14 @@ def textimage_part(r) -> None:
         B.add_to(alpha, val),
     ])
 
+
+def _stream_blocks(r) -> None:
+    """``_ti rgb8 (start) (length)`` and ``_ti a8 (start) (length)``: one stream of the text, its
+    runs expanded, into ``_ti px`` or ``_ti a``."""
+    px, alpha, table = _PX, _ALPHA, _TABLE
+    pos, c, end, cnt = var("_tp"), var("_tc"), var("_tend"), var("_tcount")
+    op2, rn = var("_top2"), var("_trn")
+
     def stream(kind: str, lst: str, rle: int) -> list[B.Node]:
         opc = f"_ti {kind} op %s"
         return [
@@ -147,6 +179,14 @@ def textimage_part(r) -> None:
         r.set("_tp", B.arg("start")), r.set("_tend", sub(add(B.arg("start"), B.arg("length")), 1)),
         *stream("a8", alpha, 7),
     ])
+
+
+def _decode_block(r) -> None:
+    """``decode textimage (text)``: the header, then the main layer (RGB8, A8 as grey, or black)
+    and the alpha layer combined into ``ti colors``."""
+    out, hdr, px, alpha = _OUT, _HDR, _PX, _ALPHA
+    s, tok, i, k, rest = var("_ts"), var("_tok"), var("_ti i"), var("_ti k"), var("_rest")
+    W, H, cnt, val = var("ti width"), var("ti height"), var("_tcount"), var("_tval")
 
     # header: tokens up to the first "|"
     mtype, mstart, mlen = r.v("_tmtype", ""), r.v("_tmstart"), r.v("_tmlen")

@@ -14,7 +14,7 @@ import numpy as np
 
 from bake.config import ImportJob
 from bake.errors import InputError
-from bake.importers import obj
+from bake.importers import obj, obj_lines, obj_parse
 from bake.importers.obj import load
 
 ONE_BLOCK = 1 << 30
@@ -72,13 +72,13 @@ def grid(n: int, z: float = 0.0) -> list[str]:
 def test_block_size_is_a_module_constant_and_a_keyword(tmp_path, monkeypatch):
     p = write(tmp_path, "\n".join(grid(40) + [f"f {i} {i + 1} {i + 2}" for i in range(1, 38)]) + "\n")
     fed = []
-    orig = obj._Parser.feed
+    orig = obj_parse._Parser.feed
 
     def feed(self, block, nlb, final):
         fed.append(len(block))
         return orig(self, block, nlb, final)
 
-    monkeypatch.setattr(obj._Parser, "feed", feed)
+    monkeypatch.setattr(obj_parse._Parser, "feed", feed)
     load(ImportJob(path=p), block_size=64)
     assert len(fed) > 20 and max(fed[:-1]) <= 64 + 40  # cut at a line end near 64 bytes
     fed.clear()
@@ -199,7 +199,7 @@ def test_newline_kind_is_decided_for_the_whole_file(tmp_path):
     """No LF in the first 64 KiB but one later: the whole file uses LF (its CRs are spaces), as
     when it was read at once; without any LF, CR ends lines."""
     cr_lines = "\r".join(["s 1 2 3 4"] * 8000)
-    assert len(cr_lines) > obj._HEAD_BYTES
+    assert len(cr_lines) > obj_lines._HEAD_BYTES
     p = write(tmp_path, cr_lines + "\rv 1 2 3\n")
     ref = same_for_all_blocks(p, sizes=(64, 4096))
     assert ref[1].n_vertices == 0 and dict(ref[3])["groups_objects_smoothing_lines"] == 1  # one long 's' line

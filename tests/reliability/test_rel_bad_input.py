@@ -67,7 +67,7 @@ OBJ_ERRORS = [
     ("f_negative_past_start", TRI + "f -9 1 2\n", 4, "-9 is out of range"),
     ("f_texture_index", TRI + "vt 0 0\nf 1/9 2/1 3/1\n", 5, "texture index 9 is out of range"),
     ("f_huge_index", TRI + "f 1 2 99999999999999999999\n", 4, "malformed face corner"),
-    ("continued_last_line", TRI + "f 1 2 3\\", 4, "malformed face corner"),  # fuzz find (obj.py fix)
+    ("continued_last_line", TRI + "f 1 2 3\\", 4, "malformed face corner"),  # fuzz find (obj_lines.py fix)
 ]
 
 

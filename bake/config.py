@@ -275,8 +275,8 @@ class LightingConfig:
 
 @dataclass
 class LightmapConfig:
-    """Lightmap atlas and texel machinery (bake/textures/lightmap.py); lighting.target = "lightmap"
-    is what fills it with light."""
+    """Lightmap atlas and texel machinery (bake/textures/: unwrap.py, texels.py, seams.py,
+    lightmap.py); lighting.target = "lightmap" is what fills it with light."""
 
     enabled: bool = False
     # xatlas packing: the atlas's longer side in texels, at most this (xatlas grows the atlas by

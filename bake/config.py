@@ -434,7 +434,7 @@ class ReportConfig:
 
 @dataclass
 class CacheConfig:
-    """The stage cache (bake/cache.py): each stage's output, keyed by everything it depends on."""
+    """The stage cache (bake/cache/): each stage's output, keyed by everything it depends on."""
 
     # "" = <output folder>/.bake-cache/stages; a path (relative to this config file) = one cache
     # shared between bakes; "none" = no cache.

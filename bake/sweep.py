@@ -26,7 +26,7 @@ API::
 no export: lighting keys only), for tests and for sweeping before a model is on disk.
 
 Stage reuse: the stages before the key's stage do not change from row to row, so every bake after
-the first loads them from the stage cache (bake/cache.py): the bake's folder cache when it has one
+the first loads them from the stage cache (bake/cache/): the bake's folder cache when it has one
 (``bake sweep`` uses ``OUT/.bake-cache/stages``, so a sweep after ``bake run`` does not even
 compute them once), else one in memory for the sweep. The key's stage and every stage after it
 always run (their seconds are the point of the sweep) and are not stored; the key's stages reuse

@@ -5,7 +5,7 @@ The inputs are the config (if one is given), the model and every file the last b
 ``export.into``). Their folders are watched with watchdog (inotify on Linux, FSEvents on macOS,
 ReadDirectoryChangesW on Windows): no polling loop of ours. Editors save in bursts (write, rename,
 chmod), so a bake starts once the inputs have been quiet for ``debounce`` seconds; a change during
-a bake starts another one right after it. The stage cache (bake/cache.py) makes the re-bake start
+a bake starts another one right after it. The stage cache (bake/cache/) makes the re-bake start
 at the first stage whose inputs changed.
 
 Every bake prints one line (time, model, triangles, vertices, list bytes, seconds, which stages

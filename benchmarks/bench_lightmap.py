@@ -43,6 +43,9 @@ from bake.scene import make_scene  # noqa: E402
 from bake.lighting import lightmap as lighting_lightmap  # noqa: E402
 from bake.lighting.rays import Tracer  # noqa: E402
 from bake.textures import lightmap as lm  # noqa: E402
+from bake.textures.seams import SEAM_MAX_ANGLE, seam_error  # noqa: E402
+from bake.textures.texels import bilinear, face_normals  # noqa: E402
+from bake.textures.unwrap import unwrap  # noqa: E402
 from bake.textures import stage as tstage  # noqa: E402
 
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
@@ -77,7 +80,7 @@ def smooth_function(scene):
 
 def surface_points(scene, atlas, n, seed=0):
     rng = np.random.default_rng(seed)
-    _, area = lm.face_normals(scene.positions, scene.triangles)
+    _, area = face_normals(scene.positions, scene.triangles)
     w = area * atlas.mapped
     t = rng.choice(len(w), size=n, p=w / w.sum())
     r = rng.uniform(size=(n, 2))
@@ -97,20 +100,20 @@ def bench_machinery(resolutions, tmp: Path) -> list[dict]:
         for res in resolutions:
             cfg = LightmapConfig(enabled=True, resolution=res, cache_dir=str(tmp / "cache"))
             t = time.perf_counter()
-            atlas = lm.unwrap(scene, cfg, cache_dir=None)
+            atlas = unwrap(scene, cfg, cache_dir=None)
             t_fresh = time.perf_counter() - t
-            lm.unwrap(scene, cfg)  # fill the cache
+            unwrap(scene, cfg)  # fill the cache
             t = time.perf_counter()
-            cached = lm.unwrap(scene, cfg)
+            cached = unwrap(scene, cfg)
             t_cached = time.perf_counter() - t
             assert cached.cached and np.array_equal(cached.tri_uvs, atlas.tri_uvs)
             tracer = Tracer(scene.positions, scene.triangles, threads=0, scale=scene.scale())
             out = lm.bake(scene, atlas, f, cfg, tracer=tracer)
-            all_seams = lm.seam_error(out.image, atlas, out.seams, smooth_only=False)
+            all_seams = seam_error(out.image, atlas, out.seams, smooth_only=False)
             raw = lm.bake(scene, atlas, f, dataclasses.replace(cfg, stitch_seams=False), tracer=tracer)
-            all_raw = lm.seam_error(raw.image, atlas, raw.seams, smooth_only=False)
+            all_raw = seam_error(raw.image, atlas, raw.seams, smooth_only=False)
             t_, pts, uv = surface_points(scene, atlas, 20000)
-            err = np.abs(lm.bilinear(out.image, uv) - f(pts, None, t_)).max(axis=1)
+            err = np.abs(bilinear(out.image, uv) - f(pts, None, t_)).max(axis=1)
             fig = out.figures
             row = {
                 "model": label, "triangles": scene.n_triangles, "resolution": res,
@@ -186,7 +189,7 @@ def bench_crash(tmp: Path) -> dict:
     cfg = LightmapConfig(enabled=True, cache_dir="none", timeout=120)
     t = time.perf_counter()
     try:
-        lm.unwrap(scene, cfg)
+        unwrap(scene, cfg)
         msg = "no crash (xatlas handled it)"
     except StageError as e:
         msg = str(e)
@@ -246,7 +249,7 @@ def main(argv=None) -> int:
         "command": "benchmarks/bench_lightmap.py" + (" --quick" if args.quick else ""),
         "notes": ["seam errors and interpolation errors are in 1/255 units of a closed-form smooth "
                   "function of position (three waves across the model); 'smooth' seams are those across "
-                  f"dihedral angles <= {lm.SEAM_MAX_ANGLE} deg, the ones stitch_seams works on",
+                  f"dihedral angles <= {SEAM_MAX_ANGLE} deg, the ones stitch_seams works on",
                   "xatlas_fresh_s includes starting the subprocess; xatlas_inside_s is xatlas alone"],
         "lightmap_machinery": machinery,
         "lightmap_real_lighting": real,

@@ -1,4 +1,4 @@
-"""The stage cache (bake/cache.py): a bake that loads stages from the cache writes the same bytes as
+"""The stage cache (bake/cache/): a bake that loads stages from the cache writes the same bytes as
 a cold bake, from every stage on; inputs and config changes invalidate exactly what they should;
 damaged, foreign and hostile entries are ignored with a warning; the folder stays under its cap;
 the report says which stages came from the cache; a sweep computes the stages before its key once."""
@@ -18,6 +18,8 @@ import pytest
 from bake import cache as cache_mod
 from bake import cli, pipeline
 from bake.cache import CacheError, DiskStore, Unsupported, decode_entry, encode_entry
+from bake.cache import keys
+from bake.cache.format import FORMAT, MAGIC
 from bake.scene import Material, make_scene
 
 
@@ -303,19 +305,19 @@ def test_a_new_tool_version_does_not_use_old_entries(tmp_path, monkeypatch):
     cfg = tmp_path / "m" / "b.toml"
     cfg.write_text(CONFIG_B)
     bake(cfg, tmp_path / "out")
-    monkeypatch.setattr(cache_mod, "tool_fingerprint", lambda: "another version")
+    monkeypatch.setattr(keys, "tool_fingerprint", lambda: "another version")
     assert bake(cfg, tmp_path / "out")["cache"]["from_cache"] == []
 
 
 def test_the_fingerprint_covers_every_source_file(tmp_path):
-    pkg = Path(cache_mod.__file__).resolve().parent
+    pkg = Path(pipeline.__file__).resolve().parent  # the bake package
     copy = tmp_path / "bake"
     shutil.copytree(pkg, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    fp = cache_mod.fingerprint_of(copy)
-    assert fp == cache_mod.tool_fingerprint()  # the same bytes: the same fingerprint
+    fp = keys.fingerprint_of(copy)
+    assert fp == keys.tool_fingerprint()  # the same bytes: the same fingerprint
     f = copy / "bsp" / "split.py"
     f.write_text(f.read_text() + "\n# a comment\n")
-    assert cache_mod.fingerprint_of(copy) != fp
+    assert keys.fingerprint_of(copy) != fp
 
 
 def test_an_input_that_changes_during_the_bake_is_not_cached(tmp_path, monkeypatch):
@@ -431,7 +433,7 @@ def encode_entry_raw(header: dict) -> list[bytes]:
     import hashlib
 
     body = json.dumps(header, separators=(",", ":")).encode()
-    head = struct.pack("<12sIQ", cache_mod.MAGIC, cache_mod.FORMAT, len(body))
+    head = struct.pack("<12sIQ", MAGIC, FORMAT, len(body))
     chunks = [head, body, b"\0" * (-(len(head) + len(body)) % 64)]
     chunks.append(hashlib.sha256(b"".join(chunks)).digest())
     return chunks
@@ -484,12 +486,12 @@ def test_decoding_refuses_what_is_not_ours():
     key = "k" * 64
     for tree, why in ((["f", "os:system"], "not a scratch-bake type"),
                       (["o", 0, "subprocess:Popen", []], "not a scratch-bake type"),
-                      (["o", 0, "bake.cache:Session", []], "not a stored dataclass"),  # a plain class
-                      (["f", "bake.cache:StageCache"], "not a stored function"),
+                      (["o", 0, "bake.cache.session:Session", []], "not a stored dataclass"),  # a plain class
+                      (["f", "bake.cache.session:StageCache"], "not a stored function"),
                       (["o", 0, "bake.scene:Scene", ["__class__", None]], "bad attribute name"),
                       (["a", 0, 0, "|O", [1], "C"], "bad array"),
                       (["x"], "unknown node")):
-        header = {"key": key, "stage": "s", "tool": cache_mod.tool_fingerprint(), "blobs": [[0, 8]], "tree": tree}
+        header = {"key": key, "stage": "s", "tool": keys.tool_fingerprint(), "blobs": [[0, 8]], "tree": tree}
         chunks = encode_entry_raw(header)
         chunks.insert(-1, b"\0" * 64)  # the blob area
         import hashlib

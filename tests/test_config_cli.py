@@ -220,7 +220,7 @@ def test_reserved_output_names_cover_what_the_bake_writes_beside_its_outputs():
     every one of them, or a configured output name could take one again."""
     from bake.outputs import html, output
     from bake.export.lists import list_file_name
-    from bake.textures.lightmap import CACHE_SUBDIR
+    from bake.textures.unwrap_cache import CACHE_SUBDIR
 
     owned = set(output.REPORT_FILES) | {html.HTML_NAME, html.LIVE_NAME, html.SWEEP_DIR, CACHE_SUBDIR.parts[0],
                                         list_file_name("verts").split("/")[0], "assets"}

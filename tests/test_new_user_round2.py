@@ -144,9 +144,9 @@ def test_a_bad_value_of_a_stage_that_is_off_is_refused_before_the_bake(tmp_path,
 def test_a_lightmap_that_times_out_fails_strict_with_status_5(tmp_path, capsys, monkeypatch):
     import sys
 
-    from bake.textures import lightmap
+    from bake.textures import unwrap
 
-    monkeypatch.setattr(lightmap, "WORKER_COMMAND", [sys.executable, "-c", "import time; time.sleep(30)"])
+    monkeypatch.setattr(unwrap, "WORKER_COMMAND", [sys.executable, "-c", "import time; time.sleep(30)"])
     model = grid_obj(tmp_path / "grid.obj", 3)
     args = ["run", str(model), "--out", str(tmp_path / "o"), "--set", "textures.enabled=true",
             "--set", "textures.lightmap.enabled=true", "--set", "textures.lightmap.timeout=1",
@@ -271,11 +271,11 @@ def test_the_lightmap_resolution_asked_is_the_one_written(model, res):
     budgeted), so every lightmap bake warned; the unwrap now asks xatlas for less until it fits."""
     from bake import pipeline
     from bake.config import LightmapConfig
-    from bake.textures import lightmap
+    from bake.textures.unwrap import unwrap
     from conftest import corpus_path
 
     sc = pipeline.run(pipeline.load_config_for(corpus_path(*model)), until="clean", cache=None).scene
-    atlas = lightmap.unwrap(sc, LightmapConfig(enabled=True, resolution=res), cache_dir=None)
+    atlas = unwrap(sc, LightmapConfig(enabled=True, resolution=res), cache_dir=None)
     assert max(atlas.width, atlas.height) <= res
     assert max(atlas.width, atlas.height) > 0.5 * res  # (not by shrinking it to nothing)
 

@@ -307,8 +307,8 @@ class LightingConfig:
 
 @dataclass
 class LightmapConfig:
-    """Lightmap atlas and texel machinery (bake/textures/lightmap.py); lighting.target = "lightmap"
-    is what fills it with light."""
+    """Lightmap atlas and texel machinery (bake/textures/: unwrap.py, texels.py, seams.py,
+    lightmap.py); lighting.target = "lightmap" is what fills it with light."""
 
     enabled: bool = False
     # xatlas packing: the atlas's longer side in texels, at most this (xatlas grows the atlas by
@@ -494,7 +494,7 @@ class ReportConfig:
 
 @dataclass
 class CacheConfig:
-    """The stage cache (bake/cache.py): each stage's output, keyed by everything it depends on."""
+    """The stage cache (bake/cache/): each stage's output, keyed by everything it depends on."""
 
     # "" = <output folder>/.bake-cache/stages; a path (relative to this config file) = one cache
     # shared between bakes; "none" = no cache.

@@ -1,9 +1,9 @@
 """``lighting.target = "lightmap"``: light every texel of the textures stage's lightmap atlas.
 
-The texel machinery (unwrap, texel samples, splat, dilate, seams) is ``bake.textures.lightmap``;
-this module supplies the light: the lighting stage's own kernels (lights with soft shadows, sky,
-ambient x AO, and a final gather of bounced light from the per-triangle solution) evaluated at
-texel sample points.
+The texel machinery (unwrap, texel samples, splat, dilate, seams) is in ``bake/textures/``
+(``lightmap.py`` and the modules it names); this module supplies the light: the lighting stage's
+own kernels (lights with soft shadows, sky, ambient x AO, and a final gather of bounced light
+from the per-triangle solution) evaluated at texel sample points.
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ import numpy as np
 
 from ..errors import ConfigError, StageError
 from ..scene import Scene
-from ..textures.lightmap import LightmapJob, Shader, bake, seam_error
+from ..textures.lightmap import LightmapJob, Shader, bake
+from ..textures.seams import seam_error
 from . import color as colmod
 from .baker import Baker, LightingResult
 from .bounce import BounceRays, field_radiance

@@ -339,12 +339,14 @@ def _atlas_warnings(atlas, cfg: TexturesConfig, rec: StageRecord) -> None:
 
 
 def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
-    from . import lightmap
+    from .lightmap import LightmapJob, coverage_figures
+    from .memory import check_memory
+    from .unwrap import unwrap
 
     lm = cfg.lightmap
     t0 = time.perf_counter()
     try:
-        atlas = lightmap.unwrap(scene, lm)
+        atlas = unwrap(scene, lm)
     except StageError as e:
         rec.fail(f"no lightmap: {e}")
         rec.effects.append({"name": "lightmap", "ran": False, "reason": str(e),
@@ -355,10 +357,10 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
                  "succeeded and its atlas is used")
     _atlas_warnings(atlas, cfg, rec)
     # before any texel work (the covering below, the lighting stage's bake): will it fit in memory?
-    mem = lightmap.check_memory(atlas, lm, lit=lm.lit)
+    mem = check_memory(atlas, lm, lit=lm.lit)
     if mem.get("warn"):
         rec.warn(f"lightmap: {mem.pop('warn')}")
-    figs = lightmap.coverage_figures(scene, atlas)
+    figs = coverage_figures(scene, atlas)
     figs.update(mem)
     figs.update({"xatlas_seconds": round(atlas.seconds, 6), "cached": atlas.cached, "key": atlas.key[:16],
                  "xatlas_version": atlas.xatlas_version, "texels_per_unit": atlas.texels_per_unit,
@@ -371,7 +373,7 @@ def _lightmap(scene: Scene, cfg: TexturesConfig, rec: StageRecord) -> Scene:
                  "textures.lightmap.padding")
     # the export stage writes the list from tri_lightmap_uvs (in the final triangle order)
     scene = scene.replace(tri_lightmap_uvs=atlas.tri_uvs.copy())
-    scene = scene.with_artefacts(lightmap=lightmap.LightmapJob(atlas=atlas, config=lm, textures=cfg))
+    scene = scene.with_artefacts(lightmap=LightmapJob(atlas=atlas, config=lm, textures=cfg))
     rec.details["lightmap"] = figs
     rec.accuracy["lightmap coverage"] = figs["coverage"]
     rec.effects.append({"name": "lightmap", "ran": True, "seconds": round(time.perf_counter() - t0, 6),

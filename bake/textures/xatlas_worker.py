@@ -2,7 +2,7 @@
 
 xatlas 0.0.9-0.0.11 can segfault (a perfectly smooth 6-times subdivided icosphere crashes in
 ``PackCharts``; shared/docs/dependencies.md section 4) and large meshes take tens of seconds, so
-``bake/textures/lightmap.py`` starts this script as a subprocess with a timeout: a crash or a hang
+``bake/textures/unwrap.py`` starts this script as a subprocess with a timeout: a crash or a hang
 costs the subprocess, never the bake.
 
 This file imports only numpy and xatlas (not the ``bake`` package), so it starts fast and works
@@ -10,7 +10,7 @@ whatever the working directory.
 
 Input (``IN.npz``): ``positions`` float32 (V, 3), ``indices`` uint32 (T, 3), ``options`` a JSON
 string with ``chart`` and ``pack`` option dicts (xatlas attribute names). The positions are the
-model centred and multiplied by a power of two (``lightmap.xatlas_scale``), and the options in
+model centred and multiplied by a power of two (``unwrap.xatlas_scale``), and the options in
 model units converted to match; this script hands both to xatlas as they are. Output (``OUT.npz``,
 written to a temporary name and renamed, so a partial file is never read): ``vmapping`` (V',),
 ``indices`` (T, 3), ``uvs`` (V', 2) normalised to [0, 1], ``width``, ``height``, ``atlas_count``,

@@ -33,7 +33,7 @@ from bake.lighting.lightmap import bake_lightmap
 from bake.scene import Material, make_scene
 from bake.textures import stage as tstage
 from bake.colorspace import srgb_to_linear
-from bake.textures.lightmap import bilinear
+from bake.textures.texels import bilinear
 from lighting_geom import grid
 
 FLOOR = (0.8, 0.8, 0.75)

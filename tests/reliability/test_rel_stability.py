@@ -403,7 +403,7 @@ def check_lighting(ref: Bake, got: Bake) -> None:
 
 
 def check_lightmap(ref: Bake, got: Bake) -> None:
-    from bake.textures.lightmap import bilinear
+    from bake.textures.texels import bilinear
 
     assert got.scene.n_triangles == ref.scene.n_triangles
     ia, ib = ref.scene.artefacts.lightmap_image, got.scene.artefacts.lightmap_image

@@ -32,9 +32,10 @@ from bake.lighting import color as lighting_color
 from bake.lighting import stage as lighting_stage
 from bake.scene import Material, make_scene
 from bake.scratch import colors, textimage
-from bake.textures import lightmap
+from bake.textures import lightmap, unwrap, unwrap_cache
 from bake.export.stage import stage as export_stage
 from bake.textures import stage as tstage
+from bake.textures.texels import cover, texel_mask
 from bake.colorspace import linear_to_srgb, srgb_to_linear
 from conftest import corpus_path
 
@@ -289,8 +290,8 @@ def test_stage_lightmap_outputs_and_crash(tmp_path, monkeypatch):
     assert rec.details["lightmap"]["triangles_without_samples"] == 0
     out.validate()
     # a crashing xatlas: a warning, no lightmap, the rest of the stage done
-    monkeypatch.setattr(lightmap, "WORKER_COMMAND", [sys.executable, "-c",
-                                                     "import os, signal; os.kill(os.getpid(), signal.SIGSEGV)"])
+    monkeypatch.setattr(unwrap, "WORKER_COMMAND", [sys.executable, "-c",
+                                                   "import os, signal; os.kill(os.getpid(), signal.SIGSEGV)"])
     cfg.lightmap = dataclasses.replace(cfg.lightmap, cache_dir="none")
     out2, rec2 = tstage.stage(scene, cfg)
     assert any("crashed (SIGSEGV)" in w for w in rec2.warnings)
@@ -302,11 +303,11 @@ def test_xatlas_cache_directory():
     from pathlib import Path
 
     cfg = config_mod.LightmapConfig()
-    assert cfg.cache_dir == "" and lightmap.cache_directory(cfg) is None  # no output folder: no cache
+    assert cfg.cache_dir == "" and unwrap_cache.cache_directory(cfg) is None  # no output folder: no cache
     cfg.out_dir = Path("out")
-    assert lightmap.cache_directory(cfg) == Path("out/.bake-cache/xatlas")
-    assert lightmap.cache_directory(dataclasses.replace(cfg, cache_dir=" None ")) is None
-    assert lightmap.cache_directory(dataclasses.replace(cfg, cache_dir="/shared/x")) == Path("/shared/x")
+    assert unwrap_cache.cache_directory(cfg) == Path("out/.bake-cache/xatlas")
+    assert unwrap_cache.cache_directory(dataclasses.replace(cfg, cache_dir=" None ")) is None
+    assert unwrap_cache.cache_directory(dataclasses.replace(cfg, cache_dir="/shared/x")) == Path("/shared/x")
     assert "out_dir" not in config_mod.to_dict(config_mod.Config())["textures"]["lightmap"]  # not a key
 
 
@@ -387,8 +388,8 @@ def test_bake_lightmap_target_end_to_end(tmp_path):
     img = final.artefacts.lightmap_image
     H, W = img.shape[:2]
     atlas = out.artefacts.lightmap.atlas
-    _, texels = lightmap.cover(atlas)
-    covered = lightmap.texel_mask(texels, np.ones(len(texels)), atlas)
+    _, texels = cover(atlas)
+    covered = texel_mask(texels, np.ones(len(texels)), atlas)
     assert covered.sum() > 0.3 * W * H
     assert np.all(np.abs(img[covered][:, :3].astype(int) - round(255 / np.sqrt(2))) <= 1)
     assert final.lists["tex lightmap size"].values.tolist() == [W, H]

@@ -72,8 +72,7 @@ def _bake(cfg: config_mod.Config, out: Path, *, quiet: bool, strict: bool, depfi
     output.check_paths(out, depfile=depfile, inputs=_known_inputs(cfg), names=_known_outputs(cfg))
     _check_into(cfg)
     prog = _Progress(quiet, total=pipeline.stage_count(cfg))
-    cfg.textures.lightmap.out_dir = out  # the default xatlas cache lives in the output folder
-    cfg.cache.out_dir = out  # and so does the default stage cache
+    cfg.out_dir = out  # the default xatlas cache and stage cache live in the output folder
     try:
         result = pipeline.run(cfg, progress=prog)
         if prog.enabled:
@@ -258,7 +257,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         rkey, rvals = sweep_mod.parse_vary(f"{key}={args.reference}", "--reference")
         reference = rvals[0]
     out_dir = Path(args.out) if args.out else _default_out(target)
-    cfg.cache.out_dir = out_dir  # the sweep reuses (and fills) the bake's stage cache
+    cfg.out_dir = out_dir  # the sweep reuses (and fills) the bake's stage cache
     out = out_dir / "sweeps" / key
     from .outputs import output
 

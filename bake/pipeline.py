@@ -110,7 +110,7 @@ def run(cfg: Config, *, progress: Progress | None = None, until: str | None = No
     stage's colours before later stages split triangles).
 
     ``cache``: ``"auto"`` = the stage cache the config names (``cache.dir``, or the output folder's
-    when ``cache.out_dir`` is set; ``bake.cache.StageCache.for_config``), a ``StageCache``, or None.
+    when ``Config.out_dir`` is set; ``bake.cache.StageCache.for_config``), a ``StageCache``, or None.
     The bake loads the entry of the deepest stage whose key is unchanged and runs the stages after
     it; ``observe`` then sees the loaded stage's scene, not those of the stages before it. Stages
     named in ``recompute`` and every stage after the first of them always run and are not stored

@@ -89,9 +89,11 @@ class StageSpec:
 
 
 def _textures_section(cfg: Config):
-    """The textures section, told whether the lighting stage will bake into its lightmap atlas."""
+    """The textures section, told whether the lighting stage will bake into its lightmap atlas and
+    where the bake's output folder is (the default xatlas cache)."""
     lit = cfg.lighting.enabled and cfg.lighting.target == "lightmap"
-    return dataclasses.replace(cfg.textures, lightmap=dataclasses.replace(cfg.textures.lightmap, lit=lit))
+    return dataclasses.replace(cfg.textures, lightmap=dataclasses.replace(cfg.textures.lightmap, lit=lit,
+                                                                          out_dir=cfg.out_dir))
 
 
 STAGES: tuple[StageSpec, ...] = (
@@ -102,10 +104,10 @@ STAGES: tuple[StageSpec, ...] = (
               keys=("mesh.triangulate.",), leaves="triangles"),
     StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean, lambda c: c.mesh.clean.enabled,
               "mesh.clean.enabled", keys=("mesh.clean.",), leaves="triangles"),
-    StageSpec("simplify", "bake.mesh.simplify:stage", lambda c: c.mesh.simplify, lambda c: c.mesh.simplify.enabled,
+    StageSpec("simplify", "bake.mesh.simplify.stage:stage", lambda c: c.mesh.simplify, lambda c: c.mesh.simplify.enabled,
               "mesh.simplify.enabled", keys=("mesh.simplify.",),
               error=("hausdorff_max", "Hausdorff max, fraction of the diagonal"),
-              report="bake.mesh.simplify_report:section"),
+              report="bake.mesh.simplify.report:section"),
     StageSpec("textures", "bake.textures.stage:stage", _textures_section, lambda c: c.textures.enabled,
               "textures.enabled", keys=("textures.",), check="bake.textures.stage:check_config"),
     StageSpec("lighting", "bake.lighting.stage:stage", lambda c: c.lighting, lambda c: c.lighting.enabled,

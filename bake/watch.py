@@ -142,8 +142,7 @@ def bake_once(target: Path, overrides: list[str], out: Path, *, quiet: bool) -> 
         files.add(os.path.abspath(model if model.is_absolute() else cfg.base_dir / model))
         if cfg.export.into:
             files.add(os.path.abspath(cfg.export.into))
-        cfg.textures.lightmap.out_dir = out
-        cfg.cache.out_dir = out
+        cfg.out_dir = out
         prog = StageProgress(quiet, total=pipeline.stage_count(cfg))
         try:
             result = pipeline.run(cfg, progress=prog)

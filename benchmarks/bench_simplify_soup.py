@@ -34,7 +34,7 @@ CHILD = r'''
 import json, resource, sys, time
 import numpy as np
 from bake.config import SimplifyConfig
-from bake.mesh import simplify as S
+from bake.mesh.simplify import stage as S
 from bake.scene import make_scene
 kind, n, ratio = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 rng = np.random.default_rng(0)

@@ -585,7 +585,7 @@ def test_cache_none_writes_no_cache(tmp_path):
 # --------------------------------------------------------------------------- sweeps
 def test_a_lighting_sweep_runs_the_stages_before_lighting_once(tmp_path, monkeypatch):
     from bake import sweep as sweep_mod
-    import bake.mesh.simplify as simplify_mod
+    import bake.mesh.simplify.stage as simplify_mod
 
     write_model(tmp_path / "m")
     cfg_path = tmp_path / "m" / "b.toml"

@@ -151,5 +151,8 @@ def test_scratch_room_depends_on_no_stage():
 
 def test_moved_modules_are_gone():
     for old in ("export/sb3.py", "export/numbers.py", "export/check.py", "textures/colors.py",
-                "textures/textimage.py"):
+                "textures/textimage.py", "mesh/simplify.py", "config.py", "cache.py",
+                *(f"export/{m}.py" for m in ("write", "output", "report", "html", "preview")),
+                *(f"mesh/simplify_{m}.py" for m in ("error", "measure", "repair", "fit", "meshopt", "parts",
+                                                    "report"))):
         assert not (ROOT / old).exists(), old

@@ -75,9 +75,9 @@ class StageCache:
             root = Path(d).expanduser()
             if not root.is_absolute():
                 root = Path(cfg.base_dir) / root
-        elif c.out_dir is not None:  # a failed first bake into a new folder must not create it
-            return cls(DiskStore(Path(c.out_dir) / SUBDIR, int(c.max_mb * 1024 * 1024),
-                                 lazy=Path(c.out_dir) / SUBDIR, label=SUBDIR.as_posix()))  # (the report names it within the folder)
+        elif cfg.out_dir is not None:  # a failed first bake into a new folder must not create it
+            return cls(DiskStore(Path(cfg.out_dir) / SUBDIR, int(c.max_mb * 1024 * 1024),
+                                 lazy=Path(cfg.out_dir) / SUBDIR, label=SUBDIR.as_posix()))  # (the report names it within the folder)
         else:
             return None
         return cls(DiskStore(root, int(c.max_mb * 1024 * 1024)))

@@ -334,7 +334,10 @@ class LightmapConfig:
     # xatlas atlas cache: "" = <output folder>/.bake-cache/xatlas (nothing outside the output
     # folder; no cache without one); a path = a cache shared between bakes; "none" = no cache.
     cache_dir: str = ""
-    # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
+    # The bake's output folder and whether the lighting stage will fill the atlas: not TOML keys,
+    # the registry's section of the textures stage fills them in from the config (``Config.out_dir``,
+    # lighting.target) -- nothing else writes them.
+    # The output folder: where the default cache lives.
     out_dir: Path | None = field(default=None, metadata={"internal": True})
     # Whether the lighting stage will fill the atlas (lighting.target = "lightmap"; not a TOML key:
     # the pipeline sets it): the memory estimate then counts the texel bake too.
@@ -500,8 +503,6 @@ class CacheConfig:
     # shared between bakes; "none" = no cache.
     dir: str = ""
     max_mb: float = 1024.0  # size cap in MiB: past it the least recently used entries are deleted
-    # The bake's output folder (not a TOML key; `bake run` sets it): where the default cache lives.
-    out_dir: Path | None = field(default=None, metadata={"internal": True})
 
     def check(self, need: Need) -> None:
         need(self.max_mb > 0, "max_mb", "must be > 0 (cache.dir = \"none\" turns the cache off)")
@@ -525,6 +526,9 @@ class Config:
     source: Path | None = field(default=None, metadata={"internal": True})
     # Every key set explicitly, and where: "file" (the config) or the --set assignment that set it.
     given: dict[str, str] = field(default_factory=dict, metadata={"internal": True})
+    # The folder the command writes the bake to (not a TOML key: ``bake run --out``, ``bake watch``,
+    # ``bake sweep``): the default stage cache and xatlas cache live in it. None: no folder.
+    out_dir: Path | None = field(default=None, metadata={"internal": True})
 
     def __getattr__(self, name: str) -> Any:
         """A section a stage brings (:func:`stage_sections`), with its defaults until set."""

@@ -27,7 +27,8 @@ CACHE_SUBDIR = Path(".bake-cache") / "xatlas"  # the default cache, inside the o
 def cache_directory(cfg: LightmapConfig) -> Path | None:
     """Where atlases are cached: ``cache_dir`` when it is a path (a cache shared between bakes,
     the user's choice), else ``.bake-cache/xatlas`` in the output folder (``cfg.out_dir``, set
-    by ``bake run``; without an output folder there is no cache); ``"none"`` turns it off."""
+    from ``Config.out_dir`` by the textures section; without an output folder there is no cache);
+    ``"none"`` turns it off."""
     if cfg.cache_dir.strip().lower() == "none":
         return None
     if cfg.cache_dir:

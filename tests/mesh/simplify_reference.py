@@ -1,11 +1,11 @@
 """An independent Hausdorff reference for the simplify tests and benchmark.
 
-Nothing here uses bake's own measuring code (bake/mesh/simplify_error.py): the distances come
-from MeshLab's Hausdorff filter (pymeshlab; exact point-triangle distances over its own uniform
-grid) and, for finding which triangle a sample lies on, from a plain point-triangle distance
-written here (projection onto the plane, else the closest of the three edges; trimesh 5.2's
-``closest_point`` was seen to return a point 2% of an edge off for a point inside a small
-triangle, so it is not used). For each direction X -> Y:
+Nothing here uses bake's own measuring code (bake/mesh/simplify/error.py and measure.py): the
+distances come from MeshLab's Hausdorff filter (pymeshlab; exact point-triangle distances over
+its own uniform grid) and, for finding which triangle a sample lies on, from a plain
+point-triangle distance written here (projection onto the plane, else the closest of the three
+edges; trimesh 5.2's ``closest_point`` was seen to return a point 2% of an edge off for a point
+inside a small triangle, so it is not used). For each direction X -> Y:
 
 1. MeshLab measures ``samples`` points on X: every vertex, points along every edge and
    area-weighted points inside the triangles (``samplevert``, ``sampleedge``, ``sampleface``).

@@ -15,9 +15,10 @@ import trimesh
 
 from bake.config import SimplifyConfig
 from bake.errors import ConfigError
-from bake.mesh import simplify as S
-from bake.mesh.simplify_error import SurfaceIndex, point_triangle_distance, topology, triangle_normals
-from bake.mesh.simplify_measure import hausdorff
+from bake.mesh.simplify import attempt, defects, meshopt, rounds
+from bake.mesh.simplify import stage as S
+from bake.mesh.simplify.error import SurfaceIndex, point_triangle_distance, topology, triangle_normals
+from bake.mesh.simplify.measure import hausdorff
 from bake.scene import Material, Scene, make_scene
 
 from conftest import corpus_path
@@ -320,7 +321,7 @@ def test_spot_keeps_uv_seams_and_is_clean(corpus):
 # --------------------------------------------------------------------------- borders and folds
 def _independent_folds(V: np.ndarray, F: np.ndarray) -> int:
     """Pairs of triangles sharing an edge whose unit normals have a dot product below -0.9,
-    counted with a plain dictionary of edges (independent of simplify_repair.folds)."""
+    counted with a plain dictionary of edges (independent of bake.mesh.simplify.repair.folds)."""
     by_edge: dict = {}
     for t, (a, b, c) in enumerate(F.tolist()):
         for u, v in ((a, b), (b, c), (c, a)):
@@ -374,11 +375,11 @@ def test_backing_off_to_the_input_returns_the_input(monkeypatch, stuck):
     V, F = bumpy_sphere(2)
     sc = make_scene(V, F)
     T0 = len(F)
-    real = S._defects
-    monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 else real(o))
+    real = defects.count
+    monkeypatch.setattr(defects, "count", lambda o: 1 if len(o.F) < T0 else real(o))
     if stuck:
-        lib = S.simplify_meshopt.simplify
-        monkeypatch.setattr(S.simplify_meshopt, "simplify",
+        lib = meshopt.simplify
+        monkeypatch.setattr(meshopt, "simplify",
                             lambda V, F, target, **k: (F.copy(), 0.0) if target > 0.95 * len(F) else lib(V, F, target, **k))
     # the defaults, with today's back-off (defects = "allow" delivers the budget instead)
     out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.5, defects="refuse"))
@@ -401,28 +402,28 @@ def test_refused_results_are_not_measured(monkeypatch, where):
     measure and the fit check's original-side measure count what they are given."""
     V, F = bumpy_sphere(3)
     T0 = len(F)
-    real = S._defects
+    real = defects.count
     state = {"peak": False, "measured": []}
     if where == "first":
-        monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 else real(o))
+        monkeypatch.setattr(defects, "count", lambda o: 1 if len(o.F) < T0 else real(o))
     else:
-        monkeypatch.setattr(S, "_defects", lambda o: 1 if state["peak"] else real(o))
-        rounds = S._peak_rounds
+        monkeypatch.setattr(defects, "count", lambda o: 1 if state["peak"] else real(o))
+        peak_rounds = rounds.peak_rounds
 
         def peak(*a, **k):
             state["peak"] = True
             try:
-                return rounds(*a, **k)
+                return peak_rounds(*a, **k)
             finally:
                 state["peak"] = False
-        monkeypatch.setattr(S, "_peak_rounds", peak)
-    for name in ("hausdorff", "original_side"):
-        fn = getattr(S, name)
+        monkeypatch.setattr(rounds, "peak_rounds", peak)
+    for name in ("hausdorff", "original_side"):  # (the measures of attempt.measure and attempt.fitted)
+        fn = getattr(attempt, name)
 
         def counted(*a, _fn=fn, _name=name, **k):
             state["measured"].append((_name, state["peak"]))
             return _fn(*a, **k)
-        monkeypatch.setattr(S, name, counted)
+        monkeypatch.setattr(attempt, name, counted)
     out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000,
                                                         defects="refuse"))
     if where == "first":
@@ -449,14 +450,14 @@ def test_flips_the_fit_turns_back_are_measured_and_kept(monkeypatch):
     want, want_rec = S.stage(make_scene(V, F), config)
     assert want_rec.details["fit"]["kept"] is True and "backed_off_from" not in want_rec.details
     raw = []
-    finish, real = S._finish, S._defects
+    finish, real = attempt._finish, defects.count
 
     def marked(*a, **k):
         o = finish(*a, **k)
         raw.append(o)
         return o
-    monkeypatch.setattr(S, "_finish", marked)
-    monkeypatch.setattr(S, "_defects", lambda o: 1 if len(o.F) < T0 and any(o is r for r in raw) else real(o))
+    monkeypatch.setattr(attempt, "_finish", marked)
+    monkeypatch.setattr(defects, "count", lambda o: 1 if len(o.F) < T0 and any(o is r for r in raw) else real(o))
     got, rec = S.stage(make_scene(V, F), config)
     assert raw and "backed_off_from" not in rec.details and rec.details["measures"] > 0
     np.testing.assert_array_equal(got.positions, want.positions)
@@ -504,7 +505,7 @@ def test_phase_seconds_count_every_attempt(monkeypatch):
     import time as _time
 
     calls = {"library": 0, "flip": 0}
-    lib, flip = S.simplify_meshopt.simplify, S._flip_check
+    lib, flip = meshopt.simplify, defects.check_flips
 
     def slow_lib(*a, **k):
         calls["library"] += 1
@@ -516,8 +517,8 @@ def test_phase_seconds_count_every_attempt(monkeypatch):
         _time.sleep(0.02)
         return flip(*a, **k)
 
-    monkeypatch.setattr(S.simplify_meshopt, "simplify", slow_lib)
-    monkeypatch.setattr(S, "_flip_check", slow_flip)
+    monkeypatch.setattr(meshopt, "simplify", slow_lib)
+    monkeypatch.setattr(defects, "check_flips", slow_flip)
     V, F = bumpy_sphere(3)
     out, rec = S.stage(make_scene(V, F), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
     d = rec.details
@@ -569,9 +570,9 @@ def test_no_rounds_below_the_floor():
     # trimesh's closest point on every input face (48 faces: one call per face)
     d = np.min([np.linalg.norm(trimesh.triangles.closest_point(np.repeat(V[f][None], len(P), 0), P) - P, axis=1)
                 for f in F], axis=0)
-    assert d.max() <= S.ROUNDS_FLOOR * diag
-    assert rec.accuracy["hausdorff_max"] <= S.ROUNDS_FLOOR
+    assert d.max() <= rounds.ROUNDS_FLOOR * diag
+    assert rec.accuracy["hausdorff_max"] <= rounds.ROUNDS_FLOOR
     # above the floor the rounds do run (a curved surface)
     Vb, Fb = bumpy_sphere(3)
     _, rec2 = S.stage(make_scene(Vb, Fb), SimplifyConfig(enabled=True, target_ratio=0.1, error_samples=4000))
-    assert rec2.accuracy["hausdorff_max"] > S.ROUNDS_FLOOR and rec2.details["refine"]
+    assert rec2.accuracy["hausdorff_max"] > rounds.ROUNDS_FLOOR and rec2.details["refine"]

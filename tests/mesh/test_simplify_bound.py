@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from bake.config import SimplifyConfig
-from bake.mesh import simplify as S
-from bake.mesh.simplify_error import SurfaceIndex
-from bake.mesh.simplify_measure import _cell_bounds, certify, directed, envelope_bound, surface_grid
+from bake.mesh.simplify import inputs
+from bake.mesh.simplify import stage as S
+from bake.mesh.simplify.error import SurfaceIndex
+from bake.mesh.simplify.measure import _cell_bounds, certify, directed, envelope_bound, surface_grid
 
 from conftest import corpus_path
 from meshgen import heightfield
@@ -259,8 +260,8 @@ def test_csg_model_at_two_percent_finds_the_peak_the_sample_missed(monkeypatch):
     # The result this peak was found on (3,542 triangles): defects refused under a 5% ceiling, the
     # parts welded where they touch, as the stage had them then (the default meets the budget, and
     # parts that keep their own vertices back off to 2,020 triangles, whose sample finds its peak)
-    real = S.parts
-    monkeypatch.setattr(S, "parts", lambda F, n: real(F, n)[:2] + (False,))
+    real = inputs.parts
+    monkeypatch.setattr(inputs, "parts", lambda F, n: real(F, n)[:2] + (False,))
     out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_ratio=0.02, defects="refuse", error_ceiling=0.05))
     assert out.n_triangles == 3542
     diag = sc.scale()
@@ -295,7 +296,7 @@ def test_long_edges_are_cut_and_short_ones_kept():
     parent's (the bound shrinks with the cell), and a cell gets four children only when its three
     edges are long (a needle three, a flat cell two): fewer points on thin triangles for the same
     shrinking. The measure's own cuts (not ``thin``) still cut every cell into four."""
-    from bake.mesh.simplify_measure import _split
+    from bake.mesh.simplify.measure import _split
 
     V, F = _slivers()
     Vo, Fo = _other_surface(*_bumpy_sphere(2))

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from bake.mesh.simplify_error import (SurfaceIndex, flip_check, point_triangle_distance, reliable_normals,
+from bake.mesh.simplify.error import (SurfaceIndex, flip_check, point_triangle_distance, reliable_normals,
                                       triangle_normals)
-from bake.mesh.simplify_measure import hausdorff, surface_grid
+from bake.mesh.simplify.measure import hausdorff, surface_grid
 
 
 def brute_distance(P: np.ndarray, V: np.ndarray, F: np.ndarray, chunk: int = 256) -> np.ndarray:
@@ -106,7 +106,7 @@ def test_verification_out_of_budget_reports_an_upper_bound():
     to 2x, as candidate bounds are on soups of big overlapping triangles) it makes the max exact
     (brute force) with the default budget, and with a tiny budget stops early, says so, and
     reports a value that is still never below the true max."""
-    from bake.mesh import simplify_error as E
+    from bake.mesh.simplify import error as E
 
     Va, Fa = bumpy(2)
     rng = np.random.default_rng(5)
@@ -184,8 +184,8 @@ def test_callers_of_near_do_not_depend_on_its_pair_order(monkeypatch, how):
 
     from scipy.spatial import cKDTree
 
-    from bake.mesh import simplify as S
-    from bake.mesh import simplify_error as E
+    from bake.mesh.simplify import defects
+    from bake.mesh.simplify import error as E
 
     Va, Fa = bumpy(5)  # more triangles than exact()'s brute-force path takes
     assert len(Fa) > E._EXACT_BRUTE
@@ -207,7 +207,7 @@ def test_callers_of_near_do_not_depend_on_its_pair_order(monkeypatch, how):
     def results():
         idx = SurfaceIndex(Va, Fa, seed=1)
         d, t = idx.exact(Q, 1.5 * idx.distance(Q)[0] + 0.01)
-        return d, t, S._lock_under(prep, out, SurfaceIndex(Va, Fa, seed=1), np.zeros(len(Va), bool))
+        return d, t, defects.lock_under(prep, out, SurfaceIndex(Va, Fa, seed=1), np.zeros(len(Va), bool))
 
     d0, t0, lock0 = results()
     near = SurfaceIndex.near
@@ -337,7 +337,7 @@ def test_long_triangles_are_tiled_for_the_tree_and_distances_stay_exact():
     """The distance index cuts triangles far longer than most into pieces for libigl's tree
     (tile_long): the pieces cover each triangle exactly (areas add up, every piece inside its
     triangle), and distances and closest triangles are the brute force's over the whole ones."""
-    from bake.mesh.simplify_error import tile_long, triangle_areas
+    from bake.mesh.simplify.error import tile_long, triangle_areas
 
     V, F = bumpy(2)
     # a fan of long slivers beside it, like a CAD cylinder's cap

@@ -48,7 +48,7 @@ def test_sigint_during_a_threaded_query_exits_cleanly(tmp_path):
         "import sys\n"
         "import numpy as np\n"
         "from scipy.spatial import cKDTree\n"
-        "from bake.mesh.simplify_error import _kd_query\n"
+        "from bake.mesh.simplify.error import _kd_query\n"
         "rng = np.random.default_rng(0)\n"
         "tree = cKDTree(rng.random((300000, 3)))\n"
         "P = rng.random((400000, 3))\n"

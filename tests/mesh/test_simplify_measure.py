@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from bake.config import SimplifyConfig
-from bake.mesh import simplify as S
-from bake.mesh import simplify_meshopt
-from bake.mesh.simplify_error import SurfaceIndex
-from bake.mesh.simplify_measure import hausdorff, surface_grid
+from bake.mesh.simplify import meshopt
+from bake.mesh.simplify import stage as S
+from bake.mesh.simplify.error import SurfaceIndex
+from bake.mesh.simplify.measure import hausdorff, surface_grid
 
 from conftest import corpus_path
 from meshgen import heightfield
@@ -92,7 +92,7 @@ def test_grid_holds_every_vertex_and_shares_edge_points():
 def test_measure_matches_the_independent_reference(name, ratio):
     sc = load(name)
     target = max(4, int(round(sc.n_triangles * ratio)))
-    Fo, _ = simplify_meshopt.simplify(sc.positions, sc.triangles, target)
+    Fo, _ = meshopt.simplify(sc.positions, sc.triangles, target)
     h = hausdorff(sc.positions, sc.triangles, sc.positions, Fo,
                   index_a=SurfaceIndex(sc.positions, sc.triangles, corners=False, k=8))
     ref = hausdorff_reference(sc.positions, sc.triangles, sc.positions, Fo, samples=150_000)
@@ -110,10 +110,10 @@ def test_cells_left_uncut_hide_no_peak(name, ratio):
     by more than 0.5% against cutting every cell (a first version took the share of the largest
     *upper bound*, which hid the bunny's peak at 10%: 0.149% against 0.164%), and fewer points
     must be measured."""
-    from bake.mesh.simplify_measure import directed
+    from bake.mesh.simplify.measure import directed
     sc = load(name)
     target = max(4, int(round(sc.n_triangles * ratio)))
-    Fo, _ = simplify_meshopt.simplify(sc.positions, sc.triangles, target)
+    Fo, _ = meshopt.simplify(sc.positions, sc.triangles, target)
     ia = SurfaceIndex(sc.positions, sc.triangles, corners=False, k=8)
     ib = SurfaceIndex(sc.positions, Fo)
     ga = surface_grid(sc.positions, sc.triangles, 20000)
@@ -255,7 +255,7 @@ def test_seeds_taken_from_the_largest_distances_first_are_the_defined_ones(seed)
     """_distinct_top tries the largest 4 k distances before the 64 k it is defined on; with
     heavy ties (a few distinct values, so ties straddle the 4 k boundary) and with spread-out
     values it must pick exactly the reference's points."""
-    from bake.mesh.simplify_measure import _distinct_top
+    from bake.mesh.simplify.measure import _distinct_top
 
     rng = np.random.default_rng(seed)
     n = 3000
@@ -271,7 +271,7 @@ def test_past_its_cap_the_simplified_grid_cuts_every_triangle_twice():
     cap bites every triangle is cut into at least 16 cells (the bunny at 50%: 2.4 points per
     triangle under the cap left its maximum 6.1% low against the independent measurement).
     Outputs small enough for the cap not to bite keep the grid they had."""
-    from bake.mesh import simplify_measure as M
+    from bake.mesh.simplify import measure as M
 
     assert M.simplified_grid(2000, 20000) == (24000, M.MIN_LEVEL_SIMPLIFIED)
     assert M.simplified_grid(6666, 20000) == (79992, M.MIN_LEVEL_SIMPLIFIED)

@@ -18,8 +18,9 @@ import pytest
 
 from bake import pipeline
 from bake.config import SimplifyConfig
-from bake.mesh import simplify as S
-from bake.mesh.simplify_parts import fold_layer, parts
+from bake.mesh.simplify import inputs, meshopt
+from bake.mesh.simplify import stage as S
+from bake.mesh.simplify.parts import fold_layer, parts
 from bake.scene import Material, make_scene
 
 import messy
@@ -78,7 +79,7 @@ def test_parts_join_through_two_triangle_edges_only():
 def test_folds_count_every_pair_on_a_non_manifold_edge():
     """Three or four triangles on one edge (what a collapsed thin part leaves): every pair of
     them facing against each other is a fold, as a loop over all pairs counts them."""
-    from bake.mesh.simplify_repair import folds
+    from bake.mesh.simplify.repair import folds
 
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -149,7 +150,7 @@ def test_messy_models_meet_the_budget_with_the_defaults(models, case, share):
     if rec.details["relaxed"]:
         assert any("let go of" in w for w in rec.warnings)
     parts_rec = rec.details["parts"]
-    assert parts_rec["count"] == parts(S._prepare(sc, SimplifyConfig()).F, sc.n_vertices)[1]
+    assert parts_rec["count"] == parts(inputs.prepare(sc, SimplifyConfig()).F, sc.n_vertices)[1]
     assert sum(p["triangles_out"] for p in parts_rec["worst"]) <= out.n_triangles
 
 
@@ -193,8 +194,8 @@ def test_what_is_let_go_comes_in_order_down_to_clustering(monkeypatch):
     sc = _per_triangle_uvs()
     mats = (Material("a", texture=Path("a.png")), Material("b", texture=Path("b.png")))
     sc = sc.replace(materials=mats, tri_material=(sc.positions[sc.triangles].mean(axis=1)[:, 1] > 0).astype(np.int64))
-    lib = S.simplify_meshopt.simplify
-    monkeypatch.setattr(S.simplify_meshopt, "simplify", lambda V, F, target, **k: (
+    lib = meshopt.simplify
+    monkeypatch.setattr(meshopt, "simplify", lambda V, F, target, **k: (
         np.asarray(F).copy(), 0.0) if len(F) == sc.n_triangles else lib(V, F, target, **k))
     target = sc.n_triangles // 10
     out, rec = S.stage(sc, SimplifyConfig(enabled=True, target_triangles=target, error_samples=4000))

@@ -16,7 +16,7 @@ import pytest
 
 from bake import pipeline
 from bake.config import SimplifyConfig
-from bake.mesh import simplify as S
+from bake.mesh.simplify import stage as S
 
 from conftest import corpus_path
 from simplify_reference import hausdorff_reference, shuffled_obj

@@ -383,7 +383,7 @@ def test_bsp_on_soups_keeps_the_surface(soup):
 def test_simplify_on_soups_gives_a_valid_scene_or_a_clear_error(soup):
     from bake import config as config_mod
     from bake.errors import BakeError
-    from bake.mesh import simplify as simp
+    from bake.mesh.simplify import stage as simp
 
     V, T = soup
     scene, _ = clean_mod.stage(make_scene(V, T), CleanConfig())

@@ -43,7 +43,7 @@ the simplified side, and its local repairs, cut every cell around their seeds).
 
 Distances
 ---------
-Every point's distance to Y comes from :class:`~bake.mesh.simplify_error.SurfaceIndex` (exact
+Every point's distance to Y comes from :class:`~bake.mesh.simplify.error.SurfaceIndex` (exact
 point-triangle distances from libigl's AABB tree). The largest ones are checked again against
 every triangle of Y that could be closer (``SurfaceIndex.exact``), until the largest checked
 distance is at least every value left: the maximum reported is the exact distance at a point
@@ -77,7 +77,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .simplify_error import SurfaceIndex, _pair_dist2, _verify
+from .error import SurfaceIndex, _pair_dist2, _verify
 
 __all__ = ["surface_grid", "SurfaceGrid", "Directed", "HausdorffResult", "directed", "original_side", "hausdorff",
            "certify", "bound_hausdorff", "envelope_bound"]

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from .simplify_error import SurfaceIndex, sample_surface
+from .error import SurfaceIndex, sample_surface
 
 __all__ = ["refit", "barycentric"]
 

@@ -1,5 +1,5 @@
 """Closest-triangle queries, exact distances and flip checks for the simplify stage (the
-Hausdorff measure itself, its sample and refinement, is in simplify_measure.py).
+Hausdorff measure itself, its sample and refinement, is in measure.py).
 
 Distances
 ---------
@@ -70,7 +70,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
-from ..interrupt import deferred_interrupt
+from ...interrupt import deferred_interrupt
 
 __all__ = ["SurfaceIndex", "sample_surface", "point_triangle_distance", "triangle_normals", "triangle_areas",
            "topology", "edge_counts", "flip_check", "FlipResult", "reliable_normals", "triangle_pattern",

@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .simplify_repair import edge_pairs
+from .repair import edge_pairs
 
 __all__ = ["Layer", "fold_layer", "parts", "part_report"]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..record import ReportSection
+from ...record import ReportSection
 
 
 def section(st: dict[str, Any]) -> ReportSection | None:

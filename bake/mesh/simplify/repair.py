@@ -26,16 +26,23 @@ the bunny at 1%, 11 of 695 triangles are within 30% of it), so they are repaired
 :func:`folds` counts pairs of neighbouring triangles whose normals point against each other
 (dot below -0.9): a fold is a surface doubled back on itself, which the flip check (normal
 against the original) does not see when both triangles of the fold lean the same way.
+
+Right after the library, triangles turned against the input (the flip check) are repaired by
+:func:`edge_flip_repair` (turning the edge a flipped triangle shares with a neighbour) and
+:func:`relocate_repair` (moving a free corner to the middle of its neighbours on the input
+surface); :func:`repair_cost` is the error around what they changed, before and after, on which
+the stage keeps or undoes them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .simplify_error import SurfaceIndex, _pair_dist2, _tri_table
-from .simplify_fit import plane_barycentric
+from .error import FlipResult, SurfaceIndex, _pair_dist2, _tri_table, triangle_pattern
+from .fit import plane_barycentric
 
-__all__ = ["border_chains", "border_locks", "LocalError", "flip_edges", "polish", "folds", "FOLD_DOT"]
+__all__ = ["border_chains", "border_locks", "LocalError", "flip_edges", "polish", "folds", "FOLD_DOT",
+           "edge_flip_repair", "relocate_repair", "repair_cost"]
 
 # neighbouring triangles whose unit normals have a dot product below this are a fold
 FOLD_DOT = -0.9
@@ -184,7 +191,7 @@ class LocalError:
         self.ia = index_a
         self.P = np.asarray(a_points, np.float64)
         # > 0: points on the triangles are a grid at this spacing, refined around the largest
-        # distances (simplify_measure.directed), not the fixed pattern
+        # distances (measure.directed), not the fixed pattern
         self.spacing = float(spacing)
         self.set_assignment(a_tri, n_tri)
 
@@ -222,7 +229,7 @@ class LocalError:
             d, _ = self.ia.distance(P)
             per = d.reshape(len(own), -1).max(axis=1)
             if self.spacing > 0 and len(own):
-                from .simplify_measure import directed, surface_grid
+                from .measure import directed, surface_grid
                 g = surface_grid(C[own].reshape(-1, 3), np.arange(3 * len(own)).reshape(-1, 3), 0,
                                  spacing=self.spacing)
                 dd = directed(self.ia, g, seeds=max(8, min(32, len(own))), rounds=6, verify=False, prune=False)
@@ -641,3 +648,138 @@ def folds(V: np.ndarray, F: np.ndarray, dot: float = FOLD_DOT) -> np.ndarray:
     bad = (d < dot) & (ln[t] > 0) & (ln[u] > 0) & (t != u)
     pairs = np.stack([t[bad], u[bad]], axis=1)
     return np.unique(np.sort(pairs, axis=1), axis=0) if len(pairs) else pairs
+
+
+# --------------------------------------------------------------------------- flipped triangles
+def edge_flip_repair(V: np.ndarray, F: np.ndarray, region: np.ndarray, tri_uvs: np.ndarray | None,
+                     fr: FlipResult, limit: int = 256) -> int:
+    """Turn the shared edge of a flipped triangle and a neighbour (in place) when both new
+    triangles then face the way the input surface under the pair does. Only edges inside one
+    region and off UV seams are turned, so materials and UVs stay valid. Works on the few
+    flipped triangles only (at most ``limit``). Returns how many edges were turned."""
+    flipped, ref = fr.flipped, fr.ref
+    # directed edge -> triangle
+    n = max(int(F.max()) + 1, 1)
+    d_key = np.concatenate([F[:, 0] * n + F[:, 1], F[:, 1] * n + F[:, 2], F[:, 2] * n + F[:, 0]])
+    d_tri = np.tile(np.arange(len(F)), 3)
+    order = np.argsort(d_key, kind="stable")
+    d_key, d_tri = d_key[order], d_tri[order]
+
+    def owner(p: int, q: int) -> int:
+        k = p * n + q
+        i = np.searchsorted(d_key, k)
+        if i < len(d_key) and d_key[i] == k and (i + 1 == len(d_key) or d_key[i + 1] != k):
+            return int(d_tri[i])
+        return -1
+
+    def nrm(tri: np.ndarray) -> np.ndarray:
+        return np.cross(V[tri[1]] - V[tri[0]], V[tri[2]] - V[tri[0]])
+
+    turned = 0
+    touched = np.zeros(len(F), bool)
+    for t in np.flatnonzero(flipped)[:limit]:
+        if touched[t]:
+            continue
+        best = None
+        for k in range(3):
+            p, q, r = F[t, k], F[t, (k + 1) % 3], F[t, (k + 2) % 3]
+            u = owner(q, p)
+            if u < 0 or touched[u] or region[u] != region[t]:
+                continue
+            ku = int(np.flatnonzero(F[u] == q)[0])  # u = (q, p, d) rotated
+            if F[u, (ku + 1) % 3] != p:
+                continue
+            d = F[u, (ku + 2) % 3]
+            if d == r or owner(r, d) >= 0 or owner(d, r) >= 0:
+                continue
+            if tri_uvs is not None:
+                uv_t = {F[t, j]: tri_uvs[t, j] for j in range(3)}
+                uv_u = {F[u, j]: tri_uvs[u, j] for j in range(3)}
+                if not (np.array_equal(uv_t[p], uv_u[p]) and np.array_equal(uv_t[q], uv_u[q])):
+                    continue  # a UV seam runs along this edge
+            t1 = np.array([p, d, r])
+            t2 = np.array([d, q, r])
+            rn = ref[t] + ref[u]
+            score = min(float(nrm(t1) @ rn), float(nrm(t2) @ rn))
+            if score > 0 and (best is None or score > best[0]):
+                best = (score, u, t1, t2, k, ku)
+        if best is None:
+            continue
+        _, u, t1, t2, k, ku = best
+        if tri_uvs is not None:
+            uv = {F[t, j]: tri_uvs[t, j].copy() for j in range(3)}
+            uv.update({F[u, (ku + 2) % 3]: tri_uvs[u, (ku + 2) % 3].copy()})
+            tri_uvs[t] = [uv[x] for x in t1]
+            tri_uvs[u] = [uv[x] for x in t2]
+        F[t], F[u] = t1, t2
+        touched[t] = touched[u] = True
+        turned += 1
+    return turned
+
+
+def relocate_repair(V: np.ndarray, F: np.ndarray, fixed: np.ndarray, fr: FlipResult, index_a: SurfaceIndex,
+                    limit: int = 256) -> int:
+    """Unfold a flipped triangle by moving one of its free corners (in place) to the centre of
+    its neighbours, put back onto the input surface (closest point), when every triangle
+    around that corner then faces the way the input under it does. Returns vertices moved."""
+    flipped = fr.flipped
+    ref = fr.ref.copy()
+    no_vote = np.linalg.norm(ref, axis=1) == 0
+    ref[no_vote] = np.cross(V[F[no_vote, 1]] - V[F[no_vote, 0]], V[F[no_vote, 2]] - V[F[no_vote, 0]])
+    ref[flipped & no_vote] *= -1.0
+    # vertex -> incident triangles (CSR)
+    order = np.argsort(F.ravel(), kind="stable")
+    starts = np.searchsorted(F.ravel()[order], np.arange(len(V) + 1))
+    moved = 0
+    for t in np.flatnonzero(flipped)[:limit]:
+        for v in F[t]:
+            if fixed[v]:
+                continue
+            ring_t = order[starts[v]:starts[v + 1]] // 3
+            ring_v = np.unique(F[ring_t].ravel())
+            ring_v = ring_v[ring_v != v]
+            if len(ring_v) == 0:
+                continue
+            c = V[ring_v].mean(axis=0)
+            _, _, cp = index_a.query(c[None])
+            done = False
+            for cand in (cp[0], c):
+                old = V[v].copy()
+                V[v] = cand
+                tri = F[ring_t]
+                n = np.cross(V[tri[:, 1]] - V[tri[:, 0]], V[tri[:, 2]] - V[tri[:, 0]])
+                if (np.einsum("ij,ij->i", n, ref[ring_t]) > 0).all():
+                    moved += 1
+                    done = True
+                    break
+                V[v] = old
+            if done:
+                break
+    return moved
+
+
+def repair_cost(index_a: SurfaceIndex, V0: np.ndarray, F0: np.ndarray, V1: np.ndarray, F1: np.ndarray
+                ) -> tuple[float, float]:
+    """Two-sided error of a repaired result (V1, F1) and of what it was before (V0, F0; same
+    triangle count), over the triangles the repair changed and the ring around them: points on
+    those triangles against the input, and the input vertices under them against those
+    triangles (KD-tree bounds, the same for both). Cheap: a repair touches a few triangles."""
+    changed = np.flatnonzero((V0[F0] != V1[F1]).any(axis=(1, 2)))
+    if len(changed) == 0:
+        return 0.0, 0.0
+    verts = np.unique(np.concatenate([F0[changed].ravel(), F1[changed].ravel()]))
+    ring = np.flatnonzero(np.isin(F0, verts).any(axis=1) | np.isin(F1, verts).any(axis=1))
+    tid, bary = triangle_pattern(np.full(len(ring), 7, np.int64))
+    pts, under = [], []
+    for Vx, Fx in ((V0, F0[ring]), (V1, F1[ring])):
+        C = Vx[Fx]
+        P = np.concatenate([np.einsum("nk,nkd->nd", bary, C[tid]), C.reshape(-1, 3)])
+        d, t = index_a.distance(P)
+        pts.append(d)
+        under.append(t)
+    qa = index_a.V[np.unique(index_a.F[np.concatenate(under)].ravel())]
+    out = []
+    for (Vx, Fx), d_ba in zip(((V0, F0[ring]), (V1, F1[ring])), pts):
+        d_ab, _ = SurfaceIndex(Vx, Fx, density=0).distance(qa)
+        out.append(max(float(d_ba.max()), float(d_ab.max())))
+    return out[0], out[1]

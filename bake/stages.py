@@ -123,7 +123,8 @@ STAGES: tuple[StageSpec, ...] = (
     StageSpec("export", "bake.export.stage:stage", lambda c: c.export, lambda c: c.export.enabled,
               "export.enabled", keys=("export.",),
               error=("position_error", "largest position rounding error, fraction of the diagonal "
-                                       "(a bound: half the rounding step)"), on_grid=True),
+                                       "(a bound: half the rounding step)"), report="bake.export.report:section",
+              on_grid=True),
 )
 
 

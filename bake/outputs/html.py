@@ -315,7 +315,7 @@ def _stage_sections(report: dict) -> list[str]:
         if sec is None:
             continue
         body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in sec.rows)
-        html_ = f"<h2>{_esc(sec.title)}</h2><table>{body}</table>"
+        html_ = f"<h2>{_esc(sec.title)}</h2>" + (f"<table>{body}</table>" if body else "")
         if sec.table:
             num = sec.numeric + (False,) * (len(sec.head) - len(sec.numeric))
             head = "".join(f"<th>{_esc(c)}</th>" for c in sec.head)

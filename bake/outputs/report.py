@@ -98,6 +98,9 @@ def build(result: BakeResult, outputs: dict[str, str] | None = None,
         "seconds": round(result.seconds, 6),
         "config": to_dict(result.config),
         "cache": _cache_json(getattr(result, "cache", None)),
+        # export.into: which blocks of the author's engine read each list (bake/scratch/engine.py)
+        "engine": next((r.details.get("into", {}).get("engine") for r in result.records
+                        if r.name == "export" and "engine" in r.details.get("into", {})), None),
     }
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, InputError
-from . import backdrop, sb3
+from . import backdrop, engine, sb3
 from . import readers
 from . import textimage
 from .check import check_packed_lists
@@ -291,6 +291,14 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
         details["into"] = {"project": str(src), "target": target, "file": out_name,
                            "project_json_bytes": sizes["project_json_bytes"], "assets": sizes["assets"],
                            "stale_lists": stale}
+        if src_project is not None:  # what the author's engine does with the lists (scratch/engine.py)
+            lengths = {n: len(values[n]) if n in values else len(v) for n, v in into_lists.items()}
+            found = engine.check(src_project, target, lengths, reader_added=bool(sprites))
+            details["into"]["engine"] = found
+            for line in found["warnings"]:
+                if record is not None:
+                    record.warn(line)
+                    record.problems.append(line)
         # the report measures the project the author will upload
         details["project_json_bytes"] = sizes["project_json_bytes"]
         read.append(src)

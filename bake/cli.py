@@ -293,11 +293,17 @@ def cmd_check(args: argparse.Namespace) -> int:
     if not target.exists():
         raise InputError("file not found", path=target)
     rep = check_mod.check(target)
+    if args.with_lists:
+        rep["engine"] = _engine_check(target, Path(args.with_lists), args.into_target)
+        rep["problems"] = list(rep["problems"]) + rep["engine"]["warnings"]
     if args.json:
         print(json.dumps(rep, indent=2))
     else:
         for line in check_mod.summary_lines(rep):
             print(line)
+        for name, e in (rep.get("engine") or {}).get("lists", {}).items():
+            who = ", ".join(f"{u['sprite']} ({u['blocks']})" for u in e["read_by"]) or "no block"
+            print(f"engine: '{name}' read by {who}")
     if args.strict and any(not lim["ok"] for lim in rep["limits"]):
         bad = [lim for lim in rep["limits"] if not lim["ok"]][0]
         raise LimitError(f"limit exceeded: {bad['name']} = {bad['value']} > {bad['limit']}", path=target)
@@ -305,6 +311,27 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise LimitError(f"{len(rep['problems'])} problem(s) under --strict, first: {rep['problems'][0]}",
                          path=target)
     return 0
+
+
+def _engine_check(project: Path, lists_json: Path, target: str) -> dict:
+    """``bake check ENGINE --with lists.json``: the engine check of ``export.into`` for lists a
+    bake wrote earlier (their names and lengths), without merging anything."""
+    from .scratch import engine, sb3
+
+    try:
+        doc = json.loads(lists_json.read_text("utf-8"))
+    except OSError as e:
+        raise InputError(f"cannot read: {e.strerror}", path=lists_json) from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"is not a bake's lists.json ({e})", path=lists_json) from None
+    lists = doc.get("lists") if isinstance(doc, dict) else None
+    if not isinstance(lists, dict) or not all(isinstance(v, list) for v in lists.values()):
+        raise InputError("is not a bake's lists.json (expected a \"lists\" object of arrays)", path=lists_json)
+    proj = sb3.load_project(project)[0]
+    names = {t.get("name") for t in proj.get("targets", []) if isinstance(t, dict)}
+    if target not in ("Stage", "_stage_") and target not in names:
+        raise ConfigError(f"--into-target: no sprite '{target}' in {project.name}")
+    return engine.check(proj, target, {n: len(v) for n, v in lists.items()}, reader_added=False)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -385,6 +412,12 @@ def build_parser() -> argparse.ArgumentParser:
     ck = sub.add_parser("check", help="where a project's bytes go: lists, blocks, assets against Scratch's limits")
     ck.add_argument("target", help="an .sb3 (or a project.json)")
     ck.add_argument("--json", action="store_true")
+    ck.add_argument("--with", dest="with_lists", metavar="LISTS_JSON",
+                    help="a bake's lists.json: check the project as the engine those lists would go into "
+                         "(which blocks read each list; lists no block reads, parallel lists, a green-flag "
+                         "delete all)")
+    ck.add_argument("--into-target", default="Stage", metavar="NAME",
+                    help="with --with: the sprite the lists would go into (default: the stage)")
     ck.add_argument("--strict", action="store_true", help="exit 4 if a limit is exceeded or the project has a problem")
     ck.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show Python tracebacks")
     ck.set_defaults(func=cmd_check)

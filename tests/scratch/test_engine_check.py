@@ -152,3 +152,24 @@ def test_a_clean_merge_says_nothing(tmp_path, strict):
     eng = _export(rep)["details"]["into"]["engine"]
     assert code == 0 and eng["warnings"] == [] and eng["parallel"] == {}
     assert {n: eng["lists"][n]["read_by"][0]["blocks"] for n in names} == {n: 1 for n in names}
+
+
+def test_bake_check_with_a_bakes_lists_checks_an_engine_without_merging(tmp_path, capsys):
+    eight = list(range(8))
+    path = _write(tmp_path / "xyz.sb3", {"X": eight, "Y": eight, "Z": eight}, {}, _draw_xyz())
+    before = path.read_bytes()
+    out = tmp_path / "out"
+    assert cli.main(["run", str(MODEL), "--out", str(out), "--quiet", "--set", 'export.names.vertices="X"']) == 0
+    capsys.readouterr()
+    assert cli.main(["check", str(path), "--with", str(out / "lists.json")]) == 0
+    text = capsys.readouterr().out
+    assert "engine: 'X' read by Engine (2)" in text and "'Y', 'Z' beside it" in text
+    assert cli.main(["check", str(path), "--with", str(out / "lists.json"), "--strict"]) == 4
+    capsys.readouterr()
+    assert cli.main(["check", str(path), "--with", str(out / "lists.json"), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["engine"]["parallel"] == {"X": ["Y", "Z"]} and path.read_bytes() == before
+    # a file that is not a bake's lists.json, and a sprite that is not there
+    (tmp_path / "bad.json").write_text("[1, 2]")
+    assert cli.main(["check", str(path), "--with", str(tmp_path / "bad.json")]) == 3
+    assert cli.main(["check", str(path), "--with", str(out / "lists.json"), "--into-target", "Nope"]) == 2

@@ -87,6 +87,10 @@ def read_sb3(data: bytes, folder: Path | None = None, strict: bool = True) -> An
     assert all(isinstance(k, str) and isinstance(v, bytes) for k, v in entries.items())
     project, assets = sb3.load_project(data)
     assert isinstance(project, dict) and isinstance(project.get("targets"), list)
+    # the engine check export.into runs on the author's project (bake/scratch/engine.py)
+    from bake.scratch import engine
+    found = engine.check(project, "Stage", {"fuzz verts": 3}, reader_added=False)
+    assert set(found["lists"]) == {"fuzz verts"} and all(isinstance(w, str) for w in found["warnings"])
     merged = sb3.merge_into(data, "Stage", {"fuzz verts": [1, 2.5, -3]})
     # what merge_into returns is itself a project bake can read back, with the list in it
     project2, _ = sb3.load_project(merged)

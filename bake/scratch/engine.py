@@ -31,6 +31,16 @@ LIST_PRIMITIVE = 13  # [13, name, id]: a list reporter in an input, or a loose o
 BROADCASTS = frozenset({"event_broadcast", "event_broadcastandwait"})
 
 
+def _d(x: Any) -> dict:
+    """``x`` if it is a dict, else an empty one (an author's project may hold anything)."""
+    return x if isinstance(x, dict) else {}
+
+
+def _targets(proj: dict) -> list[dict]:
+    ts = proj.get("targets") if isinstance(proj, dict) else None
+    return [t for t in ts if isinstance(t, dict)] if isinstance(ts, list) else []
+
+
 @dataclass
 class _Owner:
     """A target's lists: id -> (name, length)."""
@@ -42,11 +52,9 @@ class _Owner:
 
 def _owners(proj: dict) -> list[_Owner]:
     out = []
-    for t in proj.get("targets", []) or []:
-        if not isinstance(t, dict):
-            continue
+    for t in _targets(proj):
         o = _Owner(str(t.get("name", "")), bool(t.get("isStage")))
-        for lid, entry in (t.get("lists") or {}).items():
+        for lid, entry in _d(t.get("lists")).items():
             if isinstance(entry, list) and entry and isinstance(entry[0], str):
                 items = entry[1] if len(entry) > 1 and isinstance(entry[1], list) else []
                 o.lists[str(lid)] = (entry[0], len(items))
@@ -60,14 +68,14 @@ def _list_of(block: Any) -> tuple[str, str] | None:
         if len(block) >= 3 and block[0] == LIST_PRIMITIVE:
             return str(block[1]), str(block[2])
         return None
-    f = (block.get("fields") or {}).get("LIST") if isinstance(block, dict) else None
+    f = _d(block.get("fields")).get("LIST") if isinstance(block, dict) else None
     if isinstance(f, list) and f:
         return str(f[0]), str(f[1]) if len(f) > 1 and f[1] is not None else ""
     return None
 
 
 def _inputs_primitives(block: dict) -> Iterator[tuple[str, str]]:
-    for value in (block.get("inputs") or {}).values():
+    for value in _d(block.get("inputs")).values():
         if isinstance(value, list):
             for part in value[1:]:
                 if isinstance(part, list):
@@ -98,11 +106,9 @@ class _Resolver:
 
 def _uses(proj: dict, resolver: _Resolver) -> Iterator[tuple[str, str, str, tuple[str, str]]]:
     """(sprite, block id, kind: read | write | empty, list) for every list use in the project."""
-    for t in proj.get("targets", []) or []:
-        if not isinstance(t, dict):
-            continue
+    for t in _targets(proj):
         sprite = str(t.get("name", ""))
-        for bid, block in (t.get("blocks") or {}).items():
+        for bid, block in _d(t.get("blocks")).items():
             for kind, (name, lid) in _block_uses(block):
                 ref = resolver.resolve(sprite, name, lid)
                 if ref is not None:
@@ -133,33 +139,34 @@ def _first_uses(proj: dict, resolver: _Resolver, wanted: set[tuple[str, str]]) -
     a broadcast runs the scripts that receive it at that point (each message once per path)."""
     scripts: dict[str, list[tuple[str, dict, str]]] = {}  # message -> (sprite, blocks, top id)
     flags: list[tuple[str, dict, str]] = []
-    for t in proj.get("targets", []) or []:
-        if not isinstance(t, dict):
-            continue
-        blocks = t.get("blocks") or {}
+    for t in _targets(proj):
+        blocks = _d(t.get("blocks"))
         for bid, b in blocks.items():
             if not isinstance(b, dict) or not b.get("topLevel"):
                 continue
             if b.get("opcode") == "event_whenflagclicked":
                 flags.append((str(t.get("name", "")), blocks, str(bid)))
             elif b.get("opcode") == "event_whenbroadcastreceived":
-                msg = ((b.get("fields") or {}).get("BROADCAST_OPTION") or [""])[0]
+                opt = _d(b.get("fields")).get("BROADCAST_OPTION")
+                msg = opt[0] if isinstance(opt, list) and opt else ""
                 scripts.setdefault(str(msg).lower(), []).append((str(t.get("name", "")), blocks, str(bid)))
     out: list[tuple[str, tuple[str, str]]] = []
     for sprite, blocks, top in flags:
         first: dict[tuple[str, str], str] = {}
-        _walk(sprite, blocks, blocks[top].get("next"), resolver, scripts, first, set(), depth=0)
+        _walk(sprite, blocks, blocks[top].get("next"), resolver, scripts, first, frozenset(), depth=0)
         out.extend((sprite, ref) for ref, kind in first.items() if kind == "empty" and ref in wanted)
     return out
 
 
 def _walk(sprite: str, blocks: dict, bid: Any, resolver: _Resolver, scripts: dict, first: dict,
           sent: set, depth: int) -> None:
-    while isinstance(bid, str) and bid in blocks and depth < 64:
+    seen: set[str] = set()  # (a malformed project may chain its blocks in a circle)
+    while isinstance(bid, str) and bid in blocks and bid not in seen and depth < 64:
+        seen.add(bid)
         b = blocks[bid]
         if not isinstance(b, dict):
             return
-        inputs = b.get("inputs") or {}
+        inputs = _d(b.get("inputs"))
         for key, value in inputs.items():  # reporters first (they run before the block)
             if key.startswith("SUBSTACK") or not isinstance(value, list) or len(value) < 2:
                 continue
@@ -182,13 +189,14 @@ def _walk(sprite: str, blocks: dict, bid: Any, resolver: _Resolver, scripts: dic
         bid = b.get("next")
 
 
-def _walk_reporter(sprite: str, blocks: dict, bid: str, resolver: _Resolver, first: dict) -> None:
+def _walk_reporter(sprite: str, blocks: dict, bid: str, resolver: _Resolver, first: dict, depth: int = 0) -> None:
     b = blocks.get(bid)
     if not isinstance(b, dict):
         return
-    for value in (b.get("inputs") or {}).values():
-        if isinstance(value, list) and len(value) > 1 and isinstance(value[1], str) and value[1] in blocks:
-            _walk_reporter(sprite, blocks, value[1], resolver, first)
+    for value in _d(b.get("inputs")).values():
+        if isinstance(value, list) and len(value) > 1 and isinstance(value[1], str) and value[1] in blocks \
+                and depth < 64:
+            _walk_reporter(sprite, blocks, value[1], resolver, first, depth + 1)
     for kind, (name, lid) in _block_uses(b):
         ref = resolver.resolve(sprite, name, lid)
         if ref is not None:
@@ -205,7 +213,7 @@ def _message(blocks: dict, value: Any) -> str | None:
         return str(part[1]).lower()
     if isinstance(part, str) and isinstance(blocks.get(part), dict):
         menu = blocks[part]
-        f = (menu.get("fields") or {}).get("BROADCAST_OPTION")
+        f = _d(menu.get("fields")).get("BROADCAST_OPTION")
         if menu.get("opcode") == "event_broadcast_menu" and isinstance(f, list) and f:
             return str(f[0]).lower()
     return None

@@ -173,3 +173,16 @@ def test_bake_check_with_a_bakes_lists_checks_an_engine_without_merging(tmp_path
     (tmp_path / "bad.json").write_text("[1, 2]")
     assert cli.main(["check", str(path), "--with", str(tmp_path / "bad.json")]) == 3
     assert cli.main(["check", str(path), "--with", str(out / "lists.json"), "--into-target", "Nope"]) == 2
+
+
+def test_a_malformed_project_is_checked_without_hanging_or_crashing():
+    """Blocks chained in a circle, fields and inputs of the wrong type, a target that is not an
+    object: the check reads what it can."""
+    proj = _broadcast_project()
+    blocks = proj["targets"][1]["blocks"]
+    blocks["r"]["next"] = "b"  # b -> r -> b -> ...
+    blocks["d"]["inputs"] = ["not", "a", "dict"]
+    blocks["x"] = {"opcode": "data_itemoflist", "fields": "LIST", "topLevel": False}
+    proj["targets"].append("not a target")
+    found = engine.check(proj, "Stage", {"verts": 24}, reader_added=False)
+    assert found["lists"]["verts"]["read_by"] == [{"sprite": "Engine", "blocks": 1}]

@@ -108,6 +108,32 @@ class SourceInfo:
 
 
 @dataclass(frozen=True)
+class BSPArtefact:
+    """The BSP stage's tree as later stages and the reader see it: its lists' names, the stack
+    the walk needs, the on-plane tolerance it was built with (``bsp.stage.tie_tolerance``), and per
+    output triangle its source triangle and face (and per input triangle its face)."""
+
+    nodes: str
+    planes: str
+    stack: int
+    epsilon: float
+    source_triangle: np.ndarray | None = None
+    source_face: np.ndarray | None = None
+    input_source_face: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class BVHArtefact:
+    """The BVH stage's tree, its encoding, the barycentric bounds of the reader's inside test, and
+    the names of its lists ("nodes", "tris", "ids")."""
+
+    tree: Any
+    encoded: Any
+    bary: tuple[float, float]
+    lists: Mapping[str, str]
+
+
+@dataclass(frozen=True)
 class Artefacts:
     """What a stage hands to later stages and to what runs after the bake, one field each (None
     until the stage that makes it ran). A stage reads the fields of the stages before it, never
@@ -126,8 +152,8 @@ class Artefacts:
     lighting: Any = None
     lightmap_image: Any = None
     # bsp / bvh: the tree, its list names and encoding (read by the reader sprite and the previews)
-    bsp: dict[str, Any] | None = None
-    bvh: dict[str, Any] | None = None
+    bsp: BSPArtefact | None = None
+    bvh: BVHArtefact | None = None
     # export: per list its items, bytes and file; the files to write (relative path -> bytes)
     list_info: dict[str, dict] | None = None
     outputs: dict[str, bytes] | None = None

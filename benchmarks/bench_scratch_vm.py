@@ -161,7 +161,7 @@ def main() -> None:
                               "call": {"target": "Mesh", "proccode": "bsp walk", "args": []},
                               "read": {"lists": ["draw ranges"]}} for e in eyes]
             jobs.append({"load": str(p), "runs": runs})
-            enc = res.scene.artefacts.bvh["encoded"]
+            enc = res.scene.artefacts.bvh.encoded
             enc = dataclasses.replace(enc, nodes=np.asarray(lists[spec.bvh.nodes], np.float64),
                                       tris=np.asarray(lists[spec.bvh.tris], np.float64),
                                       ids=np.asarray(lists[spec.bvh.ids], np.int64))  # as written

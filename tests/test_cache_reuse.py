@@ -91,8 +91,8 @@ def same_scene(a, b) -> None:
         va, vb = a.lists[name].values, b.lists[name].values  # (a TextImage list holds strings)
         assert type(va) is type(vb), name
         assert (va.tobytes() == vb.tobytes()) if hasattr(va, "tobytes") else va == vb, name
-    for k, v in a.artefacts.bsp.items():
-        w = b.artefacts.bsp[k]
+    for k, v in vars(a.artefacts.bsp).items():
+        w = getattr(b.artefacts.bsp, k)
         assert (v.tobytes() == w.tobytes()) if isinstance(v, np.ndarray) else v == w, k
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..cache import active_memo, content_digest
 from ..record import StageRecord
-from ..scene import Scene, ScratchList
+from ..scene import BSPArtefact, Scene, ScratchList
 from . import crossing
 from .build import BuildOptions, Tree, build_tree
 from ..scratch.numbers import format_numbers, json_array, project_json_bytes, round_positions
@@ -549,11 +549,10 @@ def finish(scene: Scene, made: dict, rec: StageRecord) -> Scene:
     new = apply_layout(scene, layout)
     new = new.with_list(ScratchList(NODES_LIST, made["nodes"].copy(), 0, _NODES_DOC, "int"))
     new = new.with_list(ScratchList(PLANES_LIST, made["planes"].ravel().copy(), 4, _PLANES_DOC, "number"))
-    new = new.with_artefacts(bsp={"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": made["stack_bound"],
-                                    "epsilon": made["tolerance"],
-                                    "source_triangle": layout["source_triangle"],
-                                    "source_face": layout["source_face"],
-                                    "input_source_face": layout["input_source_face"]})
+    new = new.with_artefacts(bsp=BSPArtefact(NODES_LIST, PLANES_LIST, made["stack_bound"], made["tolerance"],
+                                             source_triangle=layout["source_triangle"],
+                                             source_face=layout["source_face"],
+                                             input_source_face=layout["input_source_face"]))
     rec.counts_in = {"triangles": scene.n_triangles, "vertices": scene.n_vertices}
     rec.counts_out = dict(made["counts_out"])
     rec.accuracy = {"inflation": made["inflation"]}
@@ -573,8 +572,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     if T_in == 0:
         new = scene.with_list(ScratchList(NODES_LIST, np.zeros(0, np.int64), 0, _NODES_DOC, "int"))
         new = new.with_list(ScratchList(PLANES_LIST, np.zeros(0), 4, _PLANES_DOC, "number"))
-        new = new.with_artefacts(bsp={"nodes": NODES_LIST, "planes": PLANES_LIST, "stack": 2,
-                                        "epsilon": opt.epsilon})
+        new = new.with_artefacts(bsp=BSPArtefact(NODES_LIST, PLANES_LIST, 2, opt.epsilon))
         rec.warn("no triangles: empty BSP")
         rec.seconds = time.perf_counter() - t0
         return new, rec

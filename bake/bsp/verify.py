@@ -87,7 +87,7 @@ def check_camera(scene, cam: Camera, order: np.ndarray | None = None, *, edge_px
     if order is None:
         order = bsp_order(scene, cam.position)
     if tie is None:
-        tie = float((scene.artefacts.bsp or {}).get("epsilon", 1e-6))
+        tie = float(scene.artefacts.bsp.epsilon) if scene.artefacts.bsp is not None else 1e-6
     z = render(cam, tv, mode="zbuffer", two_sided=ts)
     p = render(cam, tv, mode="painter", order=order, two_sided=ts)
     cov = z.covered

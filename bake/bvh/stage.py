@@ -15,7 +15,7 @@ import numpy as np
 from ..config import BVHConfig
 from ..errors import ConfigError
 from ..record import StageRecord
-from ..scene import Scene, ScratchList
+from ..scene import BVHArtefact, Scene, ScratchList
 from ..scratch.limits import LIST_ITEM_LIMIT, PROJECT_JSON_LIMIT
 from . import build as build_mod
 from .encode import MAX_LEAF, decimals_for, encode, outward, round_nearest, sizes
@@ -118,7 +118,7 @@ def stage(scene: Scene, cfg: BVHConfig) -> tuple[Scene, StageRecord]:
         names["ids"], enc.ids, stride=1, kind="int", decimals=None,
         doc="BVH leaf slots: scene triangle number (1-based)"))
     # the reader sprite's inside test uses the reference's bounds (bake.scratch.readers.BVHSpec)
-    scene = scene.with_artefacts(bvh={"tree": bvh, "encoded": enc, "bary": (BARY_LO, BARY_HI)})
+    scene = scene.with_artefacts(bvh=BVHArtefact(bvh, enc, (BARY_LO, BARY_HI), dict(names)))
 
     # the SAH of the tree as written: every box grown by the pad and rounded outward onto the
     # list grid, exactly the boxes of the binary layout's records (the float boxes the 4-wide

@@ -73,22 +73,13 @@ def auto_camera(verts: list[float] | np.ndarray) -> readers.Camera:
 
 def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
     art = scene.artefacts.bvh if scene is not None else None
-    if not art or "encoded" not in art:
+    if art is None:
         return None
-    enc = art["encoded"]
-    names = art.get("lists")
-    if not names:
-        # the BVH stage names its lists "<prefix> nodes/tris/tri ids" and documents the layout
-        nodes = next((n for n, lst in scene.lists.items() if n.endswith(" nodes")
-                      and str(getattr(lst, "doc", "")).startswith("BVH (")), None)
-        if nodes is None:
-            return None
-        prefix = nodes[: -len(" nodes")]
-        names = {"nodes": nodes, "tris": f"{prefix} tris", "ids": f"{prefix} tri ids"}
+    names = art.lists
     if not all(n in values for n in names.values()):
         return None
-    return readers.BVHSpec(bary=tuple(art["bary"]), layout=enc.layout, bits=int(enc.bits or 0), nodes=names["nodes"],
-                           tris=names["tris"], ids=names["ids"])
+    return readers.BVHSpec(bary=tuple(art.bary), layout=art.encoded.layout, bits=int(art.encoded.bits or 0),
+                           nodes=names["nodes"], tris=names["tris"], ids=names["ids"])
 
 
 def has_textimage(values: dict[str, list]) -> bool:
@@ -117,9 +108,9 @@ def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.Reader
 
 def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
     art = scene.artefacts.bsp if scene is not None else None
-    if not art:
+    if art is None:
         return None
-    nodes, planes = art.get("nodes", "bsp nodes"), art.get("planes", "bsp planes")
+    nodes, planes = art.nodes, art.planes
     if nodes not in values or planes not in values:
         return None
     return readers.BSPSpec(nodes=nodes, planes=planes)

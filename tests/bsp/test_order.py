@@ -117,5 +117,5 @@ def test_traversal_matches_the_pure_list_reading():
         # the walk never needs more stack than the bound the stage reports
         pure = draw_order(list(new.lists[NODES_LIST].values), list(new.lists[PLANES_LIST].values), eye,
                           list(tris), list(verts), [m.double_sided for m in new.materials],
-                          max_stack=new.artefacts.bsp["stack"])
+                          max_stack=new.artefacts.bsp.stack)
         np.testing.assert_array_equal(np.asarray(pure) - 1, bsp_order(new, eye))

@@ -37,7 +37,7 @@ def _area_by_source(scene, new):
     """Written area per input triangle's source (the stage's artefact), from positions alone."""
     tv = new.positions[new.triangles]
     area = 0.5 * np.linalg.norm(np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]), axis=1)
-    src = new.artefacts.bsp["source_triangle"]
+    src = new.artefacts.bsp.source_triangle
     return np.bincount(scene.tri_material[src], weights=area, minlength=len(scene.materials))
 
 
@@ -60,7 +60,7 @@ def test_written_triangles_are_not_flipped_or_collapsed(house_both):
     tv = on.positions[on.triangles]
     cr = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
     assert (np.linalg.norm(cr, axis=1) > 0).all()
-    src = on.artefacts.bsp["source_triangle"]
+    src = on.artefacts.bsp.source_triangle
     sv = s.positions[s.triangles[src]]
     n0 = np.cross(sv[:, 1] - sv[:, 0], sv[:, 2] - sv[:, 0])
     cos = np.einsum("ij,ij->i", cr, n0) / (np.linalg.norm(cr, axis=1) * np.linalg.norm(n0, axis=1))

@@ -71,14 +71,14 @@ def test_stage_keeps_every_triangle_area_plane_and_attribute():
     scene, (G, C) = _decorated(interlocked_scene())
     new, rec = stage(scene, _cfg())
     new.validate()
-    src = new.artefacts.bsp["source_triangle"]
+    src = new.artefacts.bsp.source_triangle
     assert len(src) == new.n_triangles
     area_in = 0.5 * np.linalg.norm(np.cross(*(scene.triangle_vertices()[:, 1:] - scene.triangle_vertices()[:, :1]
                                              ).transpose(1, 0, 2)), axis=1)
     tv = new.triangle_vertices()
     area_out = 0.5 * np.linalg.norm(np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]), axis=1)
     # the pieces of each source face (an input triangle, or coplanar ones merged) add up to it
-    face_out, face_in = new.artefacts.bsp["source_face"], new.artefacts.bsp["input_source_face"]
+    face_out, face_in = new.artefacts.bsp.source_face, new.artefacts.bsp.input_source_face
     nf = int(face_in.max()) + 1
     np.testing.assert_allclose(np.bincount(face_out, weights=area_out, minlength=nf),
                                np.bincount(face_in, weights=area_in, minlength=nf), rtol=1e-9, atol=1e-12)
@@ -241,7 +241,7 @@ def test_corner_zero_faces_the_shortest_edge_and_corner_data_turns_with_it():
     assert (e[0] <= e[1] * (1 + 1e-6)).all() and (e[0] <= e[2] * (1 + 1e-6)).all()
     # the winding is kept: every triangle faces the way its source triangle faced
     n_new = np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0])
-    src = new.artefacts.bsp["source_triangle"]
+    src = new.artefacts.bsp.source_triangle
     n_src = np.cross(P[src, 1] - P[src, 0], P[src, 2] - P[src, 0])
     big = np.linalg.norm(n_new, axis=1) > 1e-9
     assert ((n_new * n_src).sum(1)[big] > 0).all()

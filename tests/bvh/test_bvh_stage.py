@@ -47,8 +47,8 @@ def test_quantised_codes_contain_their_boxes():
     it contains the float box (which contains the triangles)."""
     sc = soup(500, seed=4)
     out, _ = stage(sc, BVHConfig(enabled=True, layout="quantised", quant_bits=3))
-    enc = out.artefacts.bvh["encoded"]
-    tree = out.artefacts.bvh["tree"]
+    enc = out.artefacts.bvh.encoded
+    tree = out.artefacts.bvh.tree
     w = widen(tree)
     M = 2 ** enc.bits
     frames = {0: (enc.nodes[:3], enc.nodes[3:6])}
@@ -126,7 +126,7 @@ def test_stack_bound_uses_the_record_depth(layout):
 
     sc = soup(3000, seed=5, degenerate=0)
     out, rec = stage(sc, BVHConfig(enabled=True, layout=layout, leaf_size=1))
-    enc = out.artefacts.bvh["encoded"]
+    enc = out.artefacts.bvh.encoded
     D = rec.details["record_depth"]
     assert 0 < D < rec.details["depth"]  # a record spans about two binary levels
     o, d, _ = make_rays(enc.tris.reshape(-1, 3, 3), 4000, seed=2)

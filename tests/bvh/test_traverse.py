@@ -21,7 +21,7 @@ LAYOUTS = ["binary", "wide4", "quantised"]
 
 def baked(scene, layout, **kw):
     s, rec = stage(scene, BVHConfig(enabled=True, layout=layout, **kw))
-    return s.artefacts.bvh["encoded"], rec
+    return s.artefacts.bvh.encoded, rec
 
 
 def exact_against_brute(enc, o, d):

@@ -262,7 +262,7 @@ def test_bvh_lists_equal_brute_force_on_soups_and_near_degenerate_rays(soup, lay
     V, T = soup
     scene = make_scene(V, T)
     out, rec = bvh_stage.stage(scene, BVHConfig(enabled=True, layout=layout, precision=precision, leaf_size=2))
-    enc = out.artefacts.bvh["encoded"]
+    enc = out.artefacts.bvh.encoded
     slots = enc.tris.reshape(-1, 3, 3)
     assume(len(slots) > 0)
     o, d = _rays(slots, np.random.default_rng(seed), 300)
@@ -295,7 +295,7 @@ def test_rays_through_shared_edges_of_a_closed_mesh_always_hit(layout):
         m = trimesh.creation.icosphere(subdivisions=2)
         V = m.vertices @ rotation(seed).T * rng.uniform(0.5, 3) + rng.normal(size=3) * (10 if seed % 2 else 1e4)
         out, _ = bvh_stage.stage(make_scene(V, m.faces), BVHConfig(enabled=True, layout=layout))
-        enc = out.artefacts.bvh["encoded"]
+        enc = out.artefacts.bvh.encoded
         tl = enc.tris.reshape(-1, 3, 3)
         c = tl.reshape(-1, 3).mean(0)
         targets = np.concatenate([tl.reshape(-1, 3), tl[:, 0] + rng.random((len(tl), 1)) * (tl[:, 1] - tl[:, 0])])
@@ -369,7 +369,7 @@ def test_bsp_on_soups_keeps_the_surface(soup):
     d2 = scene.scale() ** 2
     lost = rec.details.get("kept_whole", 0)
     assert abs(a_out - a_in) <= 1e-9 * a_in + 1e-9 * d2 * (1 + lost)
-    src = out.artefacts.bsp["source_triangle"]
+    src = out.artefacts.bsp.source_triangle
     P = scene.triangle_vertices()[src]
     n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True)

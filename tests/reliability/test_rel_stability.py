@@ -350,7 +350,7 @@ def check_bvh(ref: Bake, got: Bake) -> None:
                  c + rng.uniform(-0.3, 0.3, (2000, 3)) * d)
     dr = target - o
     dr /= np.linalg.norm(dr, axis=1, keepdims=True)
-    enc_ref, enc_got = ref.scene.artefacts.bvh["encoded"], got.scene.artefacts.bvh["encoded"]
+    enc_ref, enc_got = ref.scene.artefacts.bvh.encoded, got.scene.artefacts.bvh.encoded
     h_ref = trace(enc_ref, o, dr)
     s = got.sim
     h_got = trace(enc_got, s.apply(o), s.direction(dr))

@@ -62,7 +62,7 @@ def baked(tmp_path_factory, vm):
         lists = project_lists(files[f"{stem}.sb3"])
         spec = reader_spec(res.scene, res.config.export, lists)
         assert spec.bvh is not None and spec.bvh.layout == layout
-        enc = encoded_from_lists(res.scene.artefacts.bvh["encoded"], lists, spec.bvh)
+        enc = encoded_from_lists(res.scene.artefacts.bvh.encoded, lists, spec.bvh)
         rs = rays(lists["verts"], lists["tris"], RAYS_PER_BAKE, seed=k)
         n_tris = len(lists["tris"]) // 4
         ts = [1, n_tris, 1 + (7 * k) % n_tris][:LOAD_T]
@@ -157,7 +157,7 @@ def test_bvh_triangle_test_tolerance_in_the_vm(vm, tmp_path):  # noqa: F811
     jobs, encs = [], []
     for layout in ("binary", "wide4", "quantised"):
         out, _ = bvh_stage.stage(sc, BVHConfig(enabled=True, layout=layout))
-        enc = out.artefacts.bvh["encoded"]
+        enc = out.artefacts.bvh.encoded
         lists = {"bvh nodes": enc.nodes.tolist(), "bvh tris": enc.tris.tolist(), "bvh tri ids": enc.ids.tolist()}
         spec = readers.ReaderSpec(mesh=None, bvh=readers.BVHSpec(bary=(BARY_LO, BARY_HI), layout=layout, bits=enc.bits), textimage=False)
         sprite = readers.reader_target(spec, "Mesh", stage_lists=list(lists))

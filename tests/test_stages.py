@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bake import cli, pipeline, stages
-from bake.config import Config
+from bake import config as config_mod
 from bake.errors import ConfigError
 from bake.record import ReportSection, StageRecord
 from bake.scene import Scene
@@ -65,12 +65,7 @@ def example_added():
         yield
     finally:
         stages.remove("example")
-    assert stages.names() == before and "example" not in {k.split(".")[0] for k, _ in _keys_of(Config())}
-
-
-def _keys_of(cfg):
-    from bake import config as config_mod
-    return config_mod.key_defaults()
+    assert stages.names() == before and "example" not in {k.split(".")[0] for k, _ in config_mod.key_defaults()}
 
 
 def _model():

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 
-import pytest
 
 from bake import cli
 from bake.scratch import blocks as B
@@ -142,8 +141,7 @@ def test_a_sprite_list_hides_the_stage_list_of_its_name():
     assert found["emptied_at_start"] == []
 
 
-@pytest.mark.parametrize("strict", [False])
-def test_a_clean_merge_says_nothing(tmp_path, strict):
+def test_a_clean_merge_says_nothing(tmp_path):
     """The book's interleaved engine reading every list the bake writes: no warning."""
     names = ["verts", "tris", "mat colors"]
     path = _write(tmp_path / "book.sb3", {n: [] for n in names}, {},

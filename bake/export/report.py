@@ -22,8 +22,8 @@ def section(st: dict[str, Any]) -> ReportSection | None:
     out = ReportSection(f"Your engine: which blocks read the lists (baked into {eng.get('target', 'Stage')})", rows)
     out.note = ("Per list the bake wrote: the sprites whose blocks read it, write it and empty it "
                 "(delete all of), in the project as it was before the merge.")
-    out.head = ("list", "read by", "written by", "emptied by", "replaced")
-    out.table = [(name, _who(e["read_by"]) or "no block", _who(e["written_by"]), _who(e["emptied_by"]),
-                  "yes" if e.get("replaced") else "added")
+    out.head = ("list", "read by", "named in text by", "written by", "emptied by", "replaced")
+    out.table = [(name, _who(e["read_by"]) or "no block", _who(e.get("named_by", [])), _who(e["written_by"]),
+                  _who(e["emptied_by"]), "yes" if e.get("replaced") else "added")
                  for name, e in eng.get("lists", {}).items()]
     return out

@@ -9,7 +9,9 @@ the engine). For every list the bake writes: the blocks and sprites that read it
 Three things are said, each as a warning naming the lists (a problem under ``--strict``):
 
 * a written list no block of the engine reads (the engine will not see it; not said when the bake
-  adds its own reader or loader sprite, which reads them);
+  adds its own reader or loader sprite, which reads them, nor when a block names the list in a
+  text input -- a custom block or an extension given the list's name may read it by name;
+  ``named_by`` counts those; an extension's list menu holding the list's id is a read);
 * a list the bake replaces whose **parallel lists** stay behind: lists the bake does not write that
   had the replaced list's length before the merge, in the same sprite or on the stage (the
   engine's ``Y`` and ``Z`` keep 8 items while ``X`` now has 505);
@@ -28,6 +30,7 @@ READ = frozenset({"data_itemoflist", "data_lengthoflist", "data_listcontents", "
 WRITE = frozenset({"data_addtolist", "data_insertatlist", "data_replaceitemoflist", "data_deleteoflist"})
 EMPTY = frozenset({"data_deletealloflist"})
 LIST_PRIMITIVE = 13  # [13, name, id]: a list reporter in an input, or a loose one on the canvas
+TEXT_PRIMITIVE = 10  # [10, text]: a text typed into an input
 BROADCASTS = frozenset({"event_broadcast", "event_broadcastandwait"})
 
 
@@ -95,11 +98,11 @@ class _Resolver:
     def resolve(self, target: str, name: str, lid: str) -> tuple[str, str] | None:
         own = self.by_name.get(target)
         for o in ([own] if own is not None and not own.is_stage else []) + [self.stage]:
-            if lid in o.lists:
+            if lid and lid in o.lists:
                 return o.name, lid
         for o in ([own] if own is not None and not own.is_stage else []) + [self.stage]:
             for i, (n, _) in o.lists.items():
-                if n == name:
+                if name and n == name:
                     return o.name, i
         return None
 
@@ -131,6 +134,16 @@ def _block_uses(block: Any) -> Iterator[tuple[str, tuple[str, str]]]:
             yield "empty", named
     for named in _inputs_primitives(block):
         yield "read", named
+    for key, value in _d(block.get("fields")).items():
+        # an extension's list menu holds the list's id (a JSON or data extension reading it)
+        if key != "LIST" and isinstance(value, list) and value and isinstance(value[0], str):
+            yield "read", ("", value[0])
+    for value in _d(block.get("inputs")).values():
+        # a list named in text (a custom block or an extension given the list's name): it may be
+        # read by name, which no block shows; said apart from the reads
+        for part in value[1:] if isinstance(value, list) else ():
+            if isinstance(part, list) and len(part) >= 2 and part[0] == TEXT_PRIMITIVE and isinstance(part[1], str):
+                yield "named", (part[1], "")
 
 
 def _first_uses(proj: dict, resolver: _Resolver, wanted: set[tuple[str, str]]) -> list[tuple[str, tuple[str, str]]]:
@@ -228,15 +241,16 @@ def check(proj: dict, target: str, written: dict[str, int], *, reader_added: boo
     resolver = _Resolver(owners)
     where = "Stage" if target in ("Stage", "_stage_") else target
     refs: dict[str, tuple[str, str] | None] = {n: resolver.resolve(where, n, "") for n in written}
-    table: dict[str, dict[str, Any]] = {n: {"read_by": {}, "written_by": {}, "emptied_by": {},
+    table: dict[str, dict[str, Any]] = {n: {"read_by": {}, "written_by": {}, "emptied_by": {}, "named_by": {},
                                             "replaced": refs[n] is not None} for n in written}
     back = {ref: n for n, ref in refs.items() if ref is not None}
     for sprite, _bid, kind, ref in _uses(proj, resolver):
         if ref in back:
-            slot = table[back[ref]][{"read": "read_by", "write": "written_by", "empty": "emptied_by"}[kind]]
+            slot = table[back[ref]][{"read": "read_by", "write": "written_by", "empty": "emptied_by",
+                                     "named": "named_by"}[kind]]
             slot[sprite] = slot.get(sprite, 0) + 1
     warnings: list[str] = []
-    unread = sorted(n for n in written if not table[n]["read_by"])
+    unread = sorted(n for n in written if not table[n]["read_by"] and not table[n]["named_by"])
     if unread and not reader_added:
         warnings.append(f"export.into: no block of the project reads {_names(unread)}: the engine will not see "
                         f"{'it' if len(unread) == 1 else 'them'} (rename them under [export.names] to the lists "
@@ -267,7 +281,7 @@ def check(proj: dict, target: str, written: dict[str, int], *, reader_added: boo
                         "any block reads it: the baked items are gone when the engine starts (remove that block, "
                         "or bake into the list the engine fills it from)")
     for n in table:
-        for k in ("read_by", "written_by", "emptied_by"):
+        for k in ("read_by", "written_by", "emptied_by", "named_by"):
             table[n][k] = [{"sprite": s, "blocks": c} for s, c in sorted(table[n][k].items())]
     return {"target": where, "lists": table, "unread": unread if not reader_added else [],
             "parallel": parallel, "emptied_at_start": [{"sprite": s, "list": n} for s, n in emptied],

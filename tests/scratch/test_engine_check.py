@@ -184,3 +184,25 @@ def test_a_malformed_project_is_checked_without_hanging_or_crashing():
     proj["targets"].append("not a target")
     found = engine.check(proj, "Stage", {"verts": 24}, reader_added=False)
     assert found["lists"]["verts"]["read_by"] == [{"sprite": "Engine", "blocks": 1}]
+
+
+def test_a_list_read_through_an_extension_menu_or_named_in_text_is_not_called_unread():
+    """Seen in a public TurboWarp renderer (potential1energy/Scratch3D's 3D_Renderer.sb3): its sprite
+    hands its 'Model' list to a custom block by name ("Load Vertices | List: Model") and to a JSON
+    extension through a list menu holding the list's id. Written here in code, the same shapes."""
+    call = {"opcode": "procedures_call", "next": None, "parent": None, "topLevel": True,
+            "inputs": {"arg": [1, [10, "Model"]]}, "fields": {},
+            "mutation": {"proccode": "Load Vertices | List: %s"}}
+    menu = {"opcode": "someJSON_menu_get_list", "next": None, "parent": None, "topLevel": True,
+            "inputs": {}, "fields": {"get_list": ["LM", None]}, "shadow": True}
+    var = {"opcode": "data_setvariableto", "next": None, "parent": None, "topLevel": True,
+           "inputs": {"VALUE": [1, [10, "0"]]}, "fields": {"VARIABLE": ["Model", "V1"]}}
+    sprite = {"isStage": False, "name": "Renderer", "lists": {"LM": ["Model", [1, 2, 3]]},
+              "blocks": {"c": call, "m": menu, "v": var}}
+    proj = {"targets": [{"isStage": True, "name": "Stage", "lists": {}, "blocks": {}}, sprite]}
+    found = engine.check(proj, "Renderer", {"Model": 24, "tris": 8}, reader_added=False)
+    assert found["lists"]["Model"]["read_by"] == [{"sprite": "Renderer", "blocks": 1}]  # the menu, not the variable
+    assert found["lists"]["Model"]["named_by"] == [{"sprite": "Renderer", "blocks": 1}]
+    assert found["unread"] == ["tris"]
+    del sprite["blocks"]["m"]  # named in text only: not said to be unread either
+    assert engine.check(proj, "Renderer", {"Model": 24}, reader_added=False)["unread"] == []

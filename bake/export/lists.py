@@ -118,8 +118,9 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
     * ``mat two-sided``: when a material is two-sided, or with a BSP tree (its walk culls the
       single-sided triangles that face away, so an engine needs to know which are which).
 
-    Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages."""
-    n = cfg.names
+    Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages.
+    (A list given an array of names is keyed by its placeholder name: :func:`placeholder`.)"""
+    n = _Names(cfg.names)
     has_fc = scene.face_colors is not None
     has_vc = scene.vertex_colors is not None
     textured = any(m.texture is not None or m.texture_data is not None for m in scene.materials)

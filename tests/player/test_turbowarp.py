@@ -50,6 +50,7 @@ def bake_to(model: Path, out: Path, sections: dict) -> Path:
     files = res.scene.artefacts.outputs
     name = next(n for n in files if n.endswith(".sb3"))
     (out / name).write_bytes(files[name])
+    (out / "lists.json").write_bytes(files["lists.json"])  # the lists as written (packed ones too)
     return out / name
 
 
@@ -63,6 +64,8 @@ LAYOUTS = {"suzanne x y z": PER_COORDINATE, "teapot soup": SOUP_XYZ}
 def _preview(sb3_path: Path, export: dict | None = None):
     project, assets = sb3.load_project(sb3_path)
     lists = {n: items for t in project["targets"] for n, items in (t.get("lists") or {}).values()}
+    if (sb3_path.parent / "lists.json").exists():  # (a packed list is empty in the project)
+        lists.update(json.loads((sb3_path.parent / "lists.json").read_text())["lists"])
     sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
     two = lists.get("mat two-sided") or [0] * len(lists.get("mat colors", []))
     export = export or {"names": {}}
@@ -87,8 +90,10 @@ def played(tmp_path_factory):
     teapot = CORPUS / "teapot_obj" / "teapot.obj"
     if teapot.exists():
         projects.append(("teapot", bake_to(teapot, tmp / "teapot", TEAPOT)))
-        # the lit BSP teapot from soup lists (x, y, z per corner): the walk's ranges over corners
-        projects.append(("teapot soup", bake_to(teapot, tmp / "teapot soup", {**TEAPOT, "export": SOUP_XYZ})))
+        # the lit BSP teapot from soup lists (x, y, z per corner), packed: the walk's ranges over
+        # corners, the loader rebuilding split lists
+        projects.append(("teapot soup", bake_to(teapot, tmp / "teapot soup",
+                                                {**TEAPOT, "export": {**SOUP_XYZ, "pack": True}})))
     suzanne = CORPUS / "suzanne_obj" / "suzanne.obj"
     if suzanne.exists():  # no BSP tree, material colours: the list's order, culled on the stage
         projects.append(("suzanne", bake_to(suzanne, tmp / "suzanne", {})))

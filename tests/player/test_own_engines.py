@@ -182,7 +182,7 @@ def test_the_engines_lists_hold_the_default_bakes_model(played, engine, model):
 
 @pytest.mark.parametrize("engine, model", CASES, ids=IDS)
 def test_the_engine_runs_and_its_stage_agrees_with_the_green_flag_preview(played, engine, model):
-    b = _built(played, engine, model)
+    _built(played, engine, model)
     ref = played["refs"][model]
     pid = IDS[CASES.index((engine, model))]
     images = []
@@ -195,8 +195,8 @@ def test_the_engine_runs_and_its_stage_agrees_with_the_green_flag_preview(played
         assert a["covered_within_1"] >= COVERED_WITHIN_1, f"{pid} {mode}: {a}"
         assert a["interior_left_blank"] == 0 and a["empty_painted"] == 0, f"{pid} {mode}: {a}"
         images.append(r.image)
-    assert b["merged"].is_file()
-    assert np.array_equal(*images), f"{pid}: compiled and interpreted differ at {(images[0] != images[1]).any(2).sum()} pixels"
+    differ = int((images[0] != images[1]).any(2).sum())
+    assert differ == 0, f"{pid}: compiled and interpreted differ at {differ} pixels"
 
 
 def test_a_mirrored_stage_fails_the_agreement(played):

@@ -96,6 +96,9 @@ class ScratchList:
     # records of ``pack_stride`` items (0 = ``stride``); a list of variable-length records leaves both 0.
     pack_prefix: int = 0
     pack_stride: int = 0
+    # The export key the list is written under (``export.names.<role>``: "vertices", "triangles",
+    # ...), which an array of names splits by component (bake/scratch/layout.py); "" for others.
+    role: str = ""
 
 
 @dataclass(frozen=True)

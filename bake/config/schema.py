@@ -383,29 +383,58 @@ class TexturesConfig:
     lightmap: LightmapConfig = field(default_factory=LightmapConfig)
 
 
+def split_problems(names: Any, faces: str) -> list[tuple[str, str]]:
+    """(key, why) for each array of names the layout cannot take."""
+    from ..scratch.layout import SOUP_SPLITS, SPLITS  # (the layouts' table lives with the layouts)
+
+    table = SOUP_SPLITS if faces == "soup" else SPLITS
+    out = []
+    for f in dataclasses.fields(names):
+        value = getattr(names, f.name)
+        if isinstance(value, str):
+            continue
+        counts = table.get(f.name, {})
+        if len(value) not in counts:
+            if not counts:
+                why = ("holds one item per record, so it cannot be split; give one name"
+                       if f.name == "triangles" else "cannot be split; give one name")
+            else:
+                ways = "; ".join(f"{k} names ({comp} per {rec})" for k, (comp, rec) in sorted(counts.items(),
+                                                                                            reverse=True))
+                why = f"an array of names splits the list by component: {ways}; got {len(value)}"
+            out.append((f.name, why))
+    return out
+
+
 @dataclass
 class ListNames:
-    vertices: str = "verts"
-    triangles: str = "tris"
+    # A list with a stride may be given an array of names, one list per component
+    # (bake/scratch/layout.py, docs/engines.md): vertices = ["X", "Y", "Z"].
+    vertices: str | list[str] = "verts"
+    triangles: str | list[str] = "tris"
     materials: str = "mat colors"
     triangle_colors: str = "tri colors"
     vertex_colors: str = "vert colors"
-    uvs: str = "tri uvs"
-    lightmap_uvs: str = "lightmap uvs"
+    uvs: str | list[str] = "tri uvs"
+    lightmap_uvs: str | list[str] = "lightmap uvs"
     two_sided: str = "mat two-sided"
-    quads: str = "quads"
+    quads: str | list[str] = "quads"
     ngons: str = "ngons"
     packed: str = "packed lists"  # with export.pack: the packed texts the loader decodes
 
     def check(self, need: Need) -> None:
         seen: dict[str, tuple[str, str]] = {}
         for f in dataclasses.fields(self):
-            name = getattr(self, f.name)
-            need(name.strip().strip(".") != "", f.name, f"must be a list name (got {name!r})")
-            # lists/<name>.txt: names that differ only in case are one file on Windows and macOS
-            other_key, other = seen.setdefault(name.casefold(), (f"export.names.{f.name}", name))
-            need(other == name, f.name, f"'{name}' differs from {other_key} = '{other}' only in case (one list "
-                                        "file on Windows and macOS); choose another")
+            value = getattr(self, f.name)
+            for i, name in enumerate([value] if isinstance(value, str) else value):
+                key = f.name if isinstance(value, str) else f"{f.name}[{i}]"
+                need(name.strip().strip(".") != "", key, f"must be a list name (got {name!r})")
+                # lists/<name>.txt: names that differ only in case are one file on Windows and macOS
+                other_key, other = seen.setdefault(name.casefold(), (f"export.names.{key}", name))
+                need(other_key == f"export.names.{key}", key,
+                     f"'{name}' differs from {other_key} = '{other}' only in case (one list "
+                     "file on Windows and macOS); choose another" if other != name else
+                     f"'{name}' is also {other_key}: two lists cannot share a name")
 
 
 @dataclass
@@ -426,7 +455,14 @@ class ExportConfig:
     # Faces: "triangles" only, or keep quads / n-gons in their own lists (the book's Quads and
     # Ngons lists); polygons that cannot be kept whole are written as triangles, and so is every
     # face with a BSP tree, a BVH or a list that goes per triangle (tri colors, tri uvs, lightmap uvs; docs/formats.md).
-    faces: Literal["triangles", "quads", "ngons"] = "triangles"
+    # "soup": unindexed, for engines without an index list: names.vertices holds each written
+    # triangle's corner positions (x1, y1, z1, x2, y2, z2, x3, y3, z3) and names.triangles its
+    # material number (docs/engines.md).
+    faces: Literal["triangles", "quads", "ngons", "soup"] = "triangles"
+    # The first vertex and material number in the triangle, quad and n-gon lists (and the soup's
+    # material list): 1 (Scratch's items) or 0 (engines that add 1 when they read). The BSP and BVH
+    # lists keep Scratch's 1-based item and triangle numbers (their walk blocks address items).
+    index_base: int = 1
     # Positions are rounded to this many significant digits of the model's size: a step of the
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
     # bake.scratch.numbers.position_decimals, the grid the BSP builds on too).
@@ -471,6 +507,10 @@ class ExportConfig:
 
     def check(self, need: Need) -> None:
         need(1 <= self.precision <= 15, "precision", "must be between 1 and 15")
+        need(self.index_base in (0, 1) and not isinstance(self.index_base, bool), "index_base",
+             f"must be 1 (Scratch's first item) or 0 (got {self.index_base!r})")
+        for key, why in split_problems(self.names, self.faces):
+            need(False, f"names.{key}", why)
         need(self.pack_max_items >= 0, "pack_max_items", "must be >= 0 (0 = no limit)")
         for key, name, blank in (("json_name", self.json_name, False), ("sb3_name", self.sb3_name, True),
                                  ("into_name", self.into_name, True)):

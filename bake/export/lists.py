@@ -32,6 +32,7 @@ from ..record import StageRecord
 from ..scene import ScratchList, Scene
 from ..scratch.colors import scratch_numbers
 from ..scratch.numbers import decimals_for, position_decimals, round_positions
+from ..scratch.layout import placeholder, split
 
 # An item with one of these is split by Scratch's import of a .txt file (scratch-gui
 # src/lib/import-csv.js: a .txt whose first, middle and last lines split into the same number of
@@ -117,8 +118,9 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
     * ``mat two-sided``: when a material is two-sided, or with a BSP tree (its walk culls the
       single-sided triangles that face away, so an engine needs to know which are which).
 
-    Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages."""
-    n = cfg.names
+    Other stages' documented lists (BSP, BVH, texture lists, ...) are chosen by their stages.
+    (A list given an array of names is keyed by its placeholder name: :func:`placeholder`.)"""
+    n = _Names(cfg.names)
     has_fc = scene.face_colors is not None
     has_vc = scene.vertex_colors is not None
     textured = any(m.texture is not None or m.texture_data is not None for m in scene.materials)
@@ -154,6 +156,21 @@ def choose_lists(scene: Scene, cfg: ExportConfig) -> dict[str, ListChoice]:
     )}
 
 
+class _Names:
+    """``export.names`` with each array of names as one placeholder name (``layout.split`` gives
+    the parts their names)."""
+
+    def __init__(self, names) -> None:
+        self._names = names
+
+    def __getattr__(self, key: str) -> str:
+        return placeholder(getattr(self._names, key))
+
+
+def _based(ib: int) -> str:
+    return "" if ib == 1 else f" ({ib}-based)"
+
+
 def first_use_order(seq: np.ndarray, n: int) -> np.ndarray:
     """Vertex numbers ``0..n-1`` in the order ``seq`` first uses them, unused ones after in their
     own order: ``order[new] = old``."""
@@ -165,7 +182,19 @@ def first_use_order(seq: np.ndarray, n: int) -> np.ndarray:
 
 
 def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
-    n = cfg.names
+    """The mesh lists in the layout the config asks for (``bake.scratch.layout``)."""
+    out = _book_lists(scene, cfg, record)
+    if any(not isinstance(v, str) for v in vars(cfg.names).values()):
+        out = split(out, cfg.names, cfg.faces, cfg.index_base)
+    return out
+
+
+def _book_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[ScratchList]:
+    """The mesh lists, each as one list (an array of names is joined to a placeholder name until
+    ``split`` takes it apart), numbered from ``export.index_base``."""
+    n = _Names(cfg.names)
+    ib = cfg.index_base
+    soup = cfg.faces == "soup"
     out: list[ScratchList] = []
     # the grid the pipeline fixed on the scene (the BSP built on it); a scene run through this
     # stage alone gets it from export.precision
@@ -190,8 +219,8 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
     per_tri = [f"'{c.name}'" for c in (choice[n.triangle_colors], choice[n.uvs], choice[n.lightmap_uvs]) if c.write]
     if scene.artefacts.bvh is not None:
         per_tri.append("the BVH's triangle numbers")
-    whole_faces = cfg.faces != "triangles" and scene.artefacts.bsp is None and not per_tri
-    if cfg.faces != "triangles":
+    whole_faces = cfg.faces in ("quads", "ngons") and scene.artefacts.bsp is None and not per_tri
+    if cfg.faces in ("quads", "ngons"):
         if scene.artefacts.bsp is not None:
             record.warn(f"export.faces = '{cfg.faces}' ignored: the BSP stage orders triangles, "
                         "so every face is written to the triangle list")
@@ -232,8 +261,13 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         order = np.arange(V)
     record.details["vertex_order"] = cfg.vertex_order
 
+    if cfg.vertices and soup:  # each triangle's corners, in the written triangles' order
+        out.append(ScratchList(n.vertices, scene.positions[tris[keep_mask]].ravel(), 9,
+                               "x1, y1, z1, x2, y2, z2, x3, y3, z3 per triangle", "number", dec, role="vertices"))
+    elif cfg.vertices:
+        out.append(ScratchList(n.vertices, scene.positions[order].ravel(), 3, "x, y, z per vertex", "number", dec,
+                               role="vertices"))
     if cfg.vertices:
-        out.append(ScratchList(n.vertices, scene.positions[order].ravel(), 3, "x, y, z per vertex", "number", dec))
         if V:  # rounding to `dec` decimals moves a coordinate by at most half a step
             record.accuracy["position_error"] = 0.5 * 10.0 ** -dec / diag if diag > 0 else 0.0
             record.details["positions"] = {"decimals": dec, "step": 10.0 ** -dec, "max_error": 0.5 * 10.0 ** -dec,
@@ -241,25 +275,31 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
 
     poly_lists: list[ScratchList] = []
     if whole_faces:
-        q = np.concatenate([new_of[quad_idx] + 1, quad_mat[:, None] + 1], axis=1) if len(quad_idx) else \
+        q = np.concatenate([new_of[quad_idx] + ib, quad_mat[:, None] + ib], axis=1) if len(quad_idx) else \
             np.zeros((0, 5), np.int64)
-        poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad", "int"))
+        poly_lists.append(ScratchList(n.quads, q.ravel(), 5, "v1, v2, v3, v4, material per quad" + _based(ib), "int",
+                                      role="quads"))
         if cfg.faces == "ngons":
             # record layout: n, material, v1..vn
             starts = np.zeros(len(ngon_sizes) + 1, np.int64)
             np.cumsum(ngon_sizes + 2, out=starts[1:])
             flat = np.zeros(int(starts[-1]), np.int64)
             flat[starts[:-1]] = ngon_sizes
-            flat[starts[:-1] + 1] = ngon_mat + 1
+            flat[starts[:-1] + 1] = ngon_mat + ib
             if len(ngon_sizes):
                 rep = np.repeat(np.arange(len(ngon_sizes)), ngon_sizes)
                 within = np.arange(int(ngon_sizes.sum())) - np.repeat(np.cumsum(ngon_sizes) - ngon_sizes, ngon_sizes)
-                flat[starts[:-1][rep] + 2 + within] = new_of[ngon_corners] + 1
-            poly_lists.append(ScratchList(n.ngons, flat, 0, "n, material, v1..vn per polygon", "int"))
+                flat[starts[:-1][rep] + 2 + within] = new_of[ngon_corners] + ib
+            poly_lists.append(ScratchList(n.ngons, flat, 0, "n, material, v1..vn per polygon" + _based(ib), "int",
+                                          role="ngons"))
 
-    if cfg.triangles:
-        t = np.concatenate([new_of[tris[keep_mask]].reshape(-1, 3) + 1, mats[keep_mask][:, None] + 1], axis=1)
-        out.append(ScratchList(n.triangles, t.ravel(), 4, "v1, v2, v3 (1-based), material (1-based)", "int"))
+    if cfg.triangles and soup:
+        out.append(ScratchList(n.triangles, mats[keep_mask] + ib, 1, f"material ({ib}-based) per triangle", "int",
+                               role="triangles"))
+    elif cfg.triangles:
+        t = np.concatenate([new_of[tris[keep_mask]].reshape(-1, 3) + ib, mats[keep_mask][:, None] + ib], axis=1)
+        out.append(ScratchList(n.triangles, t.ravel(), 4, f"v1, v2, v3 ({ib}-based), material ({ib}-based)", "int",
+                               role="triangles"))
     out.extend(poly_lists)
 
     if cfg.materials:
@@ -279,12 +319,17 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
 
     if choice[n.vertex_colors].write:
         vc = scene.vertex_colors if scene.vertex_colors is not None else np.ones((scene.n_vertices, 4))
-        vals, kind = _colour_list(vc[order], cfg.color_format)
-        out.append(ScratchList(n.vertex_colors, vals, 1, "colour number per vertex", kind))
+        if soup:  # per corner, as the positions are
+            vals, kind = _colour_list(vc[tris[keep_mask]].reshape(-1, 4), cfg.color_format)
+            out.append(ScratchList(n.vertex_colors, vals, 1, "colour number per corner", kind, role="vertex_colors"))
+        else:
+            vals, kind = _colour_list(vc[order], cfg.color_format)
+            out.append(ScratchList(n.vertex_colors, vals, 1, "colour number per vertex", kind, role="vertex_colors"))
 
     if choice[n.uvs].write:
         uv = scene.tri_uvs if scene.tri_uvs is not None else np.zeros((T, 3, 2))
-        out.append(ScratchList(n.uvs, uv[keep_mask].ravel(), 6, "u1, v1, u2, v2, u3, v3 per triangle", "number", 4))
+        out.append(ScratchList(n.uvs, uv[keep_mask].ravel(), 6, "u1, v1, u2, v2, u3, v3 per triangle", "number", 4,
+                               role="uvs"))
 
     if choice[n.lightmap_uvs].write:
         lm = scene.tri_lightmap_uvs if scene.tri_lightmap_uvs is not None else np.zeros((T, 3, 2))
@@ -292,7 +337,7 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
         side = max(img.shape[:2]) if img is not None else 4096
         out.append(ScratchList(n.lightmap_uvs, lm[keep_mask].ravel(), 6,
                                "lightmap u1, v1, u2, v2, u3, v3 per triangle (v up)", "number",
-                               decimals_for(0.1 / side)))  # a tenth of a texel
+                               decimals_for(0.1 / side), role="lightmap_uvs"))  # a tenth of a texel
     for c in choice.values():
         if not c.write and c.available:  # data the scene has that the bake leaves out: say why
             record.effects.append({"name": f"list '{c.name}'", "ran": False, "reason": c.reason, "key": c.key})
@@ -301,11 +346,12 @@ def mesh_lists(scene: Scene, cfg: ExportConfig, record: StageRecord) -> list[Scr
     return out
 
 
-def index_columns(name: str, cfg: ExportConfig) -> tuple[int, ...]:
-    """Columns of a list holding vertex numbers in first-use order (packed as index codes)."""
-    if cfg.vertex_order != "first-use":
+def index_columns(lst: ScratchList, cfg: ExportConfig) -> tuple[int, ...]:
+    """Columns of a list holding 1-based vertex numbers in first-use order (packed as index
+    codes): the book's triangle and quad records."""
+    if cfg.vertex_order != "first-use" or cfg.index_base != 1:
         return ()
-    return {cfg.names.triangles: (0, 1, 2), cfg.names.quads: (0, 1, 2, 3)}.get(name, ())
+    return {("triangles", 4): (0, 1, 2), ("quads", 5): (0, 1, 2, 3)}.get((lst.role, lst.stride), ())
 
 
 def pack_lists(lists: list[ScratchList], values: dict[str, list], info: dict[str, dict], cfg: ExportConfig,
@@ -335,7 +381,7 @@ def pack_lists(lists: list[ScratchList], values: dict[str, list], info: dict[str
         pk = None
         if why is None:
             pk = pack(name, values[name], lst.pack_stride or lst.stride, prefix=lst.pack_prefix,
-                      index_columns=index_columns(name, cfg))
+                      index_columns=index_columns(lst, cfg))
             if pk is None:
                 why = "values are not decimals below 2^53 (not packed)"
         if pk is not None:

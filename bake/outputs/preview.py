@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..scratch.layout import join
 from ..render import Camera, Image, headlight, render
 from ..scratch import backdrop
 from ..scratch.colors import decode_numbers
@@ -75,12 +76,14 @@ def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
     and which materials are two-sided). ``lightmap``: the decoded lightmap image if one was
     written. Returns None when the bake wrote no vertex or triangle list."""
     cfg = report.get("config", {})
-    names = cfg.get("export", {}).get("names", {})
-    vname, tname = names.get("vertices", "verts"), names.get("triangles", "tris")
-    if vname not in lists or tname not in lists:
+    export = cfg.get("export", {})
+    names = export.get("names", {})
+    # any layout (split, 0-based, soup) read back in the book's (bake/scratch/layout.py)
+    book = join(lists, names, export.get("faces", "triangles"), export.get("index_base", 1))
+    if "vertices" not in book or "triangles" not in book:
         return None
-    verts = np.asarray(lists[vname], np.float64).reshape(-1, 3)
-    t = np.asarray(lists[tname], np.int64).reshape(-1, 4)
+    verts = np.asarray(book["vertices"], np.float64).reshape(-1, 3)
+    t = np.asarray(book["triangles"], np.int64).reshape(-1, 4)
     mats = report.get("materials") or []
     mname = names.get("materials", "mat colors")
     if mname in lists:
@@ -101,10 +104,10 @@ def mesh_from_lists(lists: dict[str, list], report: dict[str, Any],
         mesh.tri_rgb = _rgb(lists[cname])
     if vcname in lists and len(lists[vcname]) == len(verts):
         mesh.vert_rgb = _rgb(lists[vcname])
-    lname = names.get("lightmap_uvs", "lightmap uvs")
-    if lightmap is not None and lname in lists and len(lists[lname]) == 6 * len(t):
+    lm = book.get("lightmap_uvs")
+    if lightmap is not None and lm is not None and len(lm) == 6 * len(t):
         mesh.lightmap = lightmap
-        mesh.lightmap_uvs = np.asarray(lists[lname], np.float64).reshape(-1, 3, 2)
+        mesh.lightmap_uvs = np.asarray(lm, np.float64).reshape(-1, 3, 2)
     if "bsp nodes" in lists and "bsp planes" in lists:
         mesh.bsp_nodes, mesh.bsp_planes = lists["bsp nodes"], lists["bsp planes"]
     mesh.colour_source = ("lightmap (bilinear)" if mesh.lightmap is not None else

@@ -21,6 +21,7 @@ from . import backdrop, engine, sb3
 from . import readers
 from . import textimage
 from .check import check_packed_lists
+from .layout import join
 from .loader import LoaderPart, LoaderSpec
 
 
@@ -88,22 +89,34 @@ def has_textimage(values: dict[str, list]) -> bool:
                for items in values.values())
 
 
+def book_lists(cfg: Any, values: dict[str, list]) -> dict[str, list]:
+    """The mesh lists in the book's layout (role -> items), whatever layout the bake wrote them in
+    (``bake.scratch.layout.join``)."""
+    return join(values, cfg.names, _cfg(cfg, "faces", "triangles"), _cfg(cfg, "index_base", 1))
+
+
 def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.ReaderSpec:
     """The reader for these lists: only the blocks whose lists the bake wrote (a renderer for a
     mesh, the BSP walk for a BSP tree, the ray query for the BVH layout written, the TextImage
     decoder for TextImage strings)."""
     n = cfg.names
     mesh = None
-    if n.vertices in values and n.triangles in values:
-        mesh = readers.MeshNames(verts=n.vertices, tris=n.triangles,
+    book = book_lists(cfg, values)
+    if "vertices" in book and "triangles" in book:
+        mesh = readers.MeshNames(verts=_one_or_tuple(n.vertices), tris=_one_or_tuple(n.triangles),
                                  mat_colors=n.materials if n.materials in values else None,
                                  tri_colors=n.triangle_colors if n.triangle_colors in values else None,
-                                 two_sided=getattr(n, "two_sided", "mat two-sided"))
-    cam = auto_camera(values[n.vertices]) if mesh else readers.Camera()
+                                 two_sided=getattr(n, "two_sided", "mat two-sided"),
+                                 index_base=_cfg(cfg, "index_base", 1), soup=_cfg(cfg, "faces", "") == "soup")
+    cam = auto_camera(book["vertices"]) if mesh else readers.Camera()
     two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
     return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),
                               textimage=has_textimage(values), renderer=True, camera=cam, two_sided=two,
-                              bounds=readers.bounding_sphere(values[n.vertices]) if mesh else None)
+                              bounds=readers.bounding_sphere(book["vertices"]) if mesh else None)
+
+
+def _one_or_tuple(value: str | list[str]) -> str | tuple[str, ...]:
+    return value if isinstance(value, str) else tuple(value)
 
 
 def _bsp_spec(scene: Any, values: dict[str, list]) -> readers.BSPSpec | None:
@@ -134,7 +147,7 @@ def _list_names(proj: dict | None, targets: Any = None) -> set[str]:
 def _bake_list_names(cfg: Any) -> set[str]:
     """Lists a bake writes, whichever stages run: the mesh lists (``export.names``), the packed
     texts, and the BSP and BVH lists (their readers' default names)."""
-    names = {v for v in vars(cfg.names).values() if isinstance(v, str)}
+    names = {n for v in vars(cfg.names).values() for n in ([v] if isinstance(v, str) else v)}
     for spec in (readers.BSPSpec, readers.BVHSpec):  # their list-name fields
         names |= {f.default for f in dataclasses.fields(spec) if f.name in ("nodes", "planes", "tris", "ids")}
     return names
@@ -205,8 +218,9 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
         stage = sb3.Target("Stage", is_stage=True, lists=stored)
         if spec is not None and spec.mesh is not None:  # the reader draws the mesh: a backdrop it shows on
-            m = spec.mesh
-            bd = backdrop.choose(values[m.verts], values[m.tris], values.get(m.tri_colors) if m.tri_colors else None,
+            m, book = spec.mesh, book_lists(cfg, values)
+            bd = backdrop.choose(book["vertices"], book["triangles"],
+                                 values.get(m.tri_colors) if m.tri_colors else None,
                                  values.get(m.mat_colors) if m.mat_colors else None)
             stage.costumes = [sb3.Costume("backdrop1", sb3.Asset(bd.svg(), "svg"), 1, (240.0, 180.0))]
             details["backdrop"] = bd.to_json()

@@ -103,11 +103,27 @@ VAR_ID_LENGTH = 4
 # --------------------------------------------------------------------------- specs
 @dataclass
 class MeshNames:
-    verts: str = "verts"
-    tris: str = "tris"
+    """The mesh lists the renderer reads, in the layout the bake wrote (bake/scratch/layout.py):
+    ``verts`` one list (x, y, z interleaved) or one per component (x, y, z); ``tris`` one list
+    (v1, v2, v3, material) or four; ``index_base`` the first vertex and material number (1 or 0);
+    ``soup``: ``verts`` holds each triangle's corners (one list of 9 numbers a triangle, or x, y, z
+    per corner, or 9 lists x1 .. z3) and ``tris`` its material number."""
+
+    verts: str | tuple[str, ...] = "verts"
+    tris: str | tuple[str, ...] = "tris"
     mat_colors: str | None = "mat colors"
     tri_colors: str | None = "tri colors"
     two_sided: str = "mat two-sided"  # read from the project when the bake wrote it, else the sprite's own
+    index_base: int = 1
+    soup: bool = False
+
+    def data_lists(self) -> list[str]:
+        """The vertex and triangle lists, one name each."""
+        return [*_names(self.verts), *_names(self.tris)]
+
+
+def _names(value: str | Sequence[str]) -> list[str]:
+    return [value] if isinstance(value, str) else list(value)
 
 
 @dataclass
@@ -169,7 +185,7 @@ class ReaderSpec:
         """The data lists the blocks read (they must exist in the project)."""
         out: list[str] = []
         if self.mesh:
-            out += [self.mesh.verts, self.mesh.tris]
+            out += self.mesh.data_lists()
             out += [n for n in (self.mesh.mat_colors, self.mesh.tri_colors) if n]
         if self.bvh:
             out += [self.bvh.nodes, self.bvh.tris, self.bvh.ids]
@@ -334,18 +350,48 @@ def _two_sided(spec: ReaderSpec) -> bool:
 
 
 # ---- mesh helper (authors' block)
+def _index(m: MeshNames, rep: Any) -> Any:
+    """A vertex or material number as a 1-based item number (0-based lists: + 1)."""
+    return rep if m.index_base == 1 else add(rep, 1)
+
+
 def _load_triangle(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     t = B.arg("t")
     base = r.v("_b")
-    body: list[B.Node] = [r.set("_b", mul(4, sub(t, 1)))]
-    for k in (1, 2, 3):
-        body.append(r.set(f"_i{k}", mul(3, sub(item(add(base, k), m.tris), 1))))
+    split_verts = not isinstance(m.verts, str)
+    body: list[B.Node] = []
+    if m.soup:  # _i<k>: where corner k's numbers start (interleaved: the item before them)
+        if not split_verts:
+            body += [r.set(f"_i{k}", add(mul(9, sub(t, 1)), 3 * (k - 1))) for k in (1, 2, 3)]
+        elif len(m.verts) == 3:
+            body += [r.set(f"_i{k}", add(mul(3, sub(t, 1)), k)) for k in (1, 2, 3)]
+        material = _index(m, item(t, m.tris))
+    elif isinstance(m.tris, str):
+        body.append(r.set("_b", mul(4, sub(t, 1))))
+        for k in (1, 2, 3):
+            number = item(add(base, k), m.tris)
+            if split_verts:
+                body.append(r.set(f"_i{k}", _index(m, number)))
+            else:  # the item before vertex v's x: 3 * (v - 1)
+                body.append(r.set(f"_i{k}", mul(3, sub(number, 1)) if m.index_base == 1 else mul(3, number)))
+        material = _index(m, item(add(base, 4), m.tris))
+    else:
+        for k in (1, 2, 3):
+            number = _index(m, item(t, m.tris[k - 1]))
+            body.append(r.set(f"_i{k}", number if split_verts else mul(3, sub(number, 1))))
+        material = _index(m, item(t, m.tris[3]))
     for k in (1, 2, 3):
         ik = r.v(f"_i{k}")
         for a, axis in enumerate("xyz"):
-            body.append(r.set(f"{axis}{k}", item(add(ik, a + 1), m.verts)))
-    body.append(r.set("tri color", _colour(r, t, item(add(base, 4), m.tris))))
+            if not split_verts:
+                value = item(add(ik, a + 1), m.verts)
+            elif len(m.verts) == 9:
+                value = item(t, m.verts[3 * (k - 1) + a])
+            else:
+                value = item(ik, m.verts[a])
+            body.append(r.set(f"{axis}{k}", value))
+    body.append(r.set("tri color", _colour(r, t, material)))
     r.define("load triangle %s", ["t"], body)
 
 
@@ -372,7 +418,15 @@ def _camera_blocks(r: ReaderBuilder) -> None:
     dx, dy, dz, z1, z2 = (r.v(n) for n in ("_dx", "_dy", "_dz", "_z1", "_z2"))
     syw, cyw, spt, cpt = (r.v(n) for n in ("_syaw", "_cyaw", "_spitch", "_cpitch"))
     near = r.v("near")
-    nverts = div(B.list_length(m.verts), 3)
+    # the points to project, one loop step at a time: (x, y, z) reporters of each, and the step of _i
+    V = m.verts
+    if isinstance(V, str):  # x, y, z interleaved (a vertex, or a soup's corner, every 3 items)
+        nverts = div(B.list_length(V), 3)
+        points, step = [(item(i, V), item(add(i, 1), V), item(add(i, 2), V))], 3
+    else:  # one list per component: x, y, z (a vertex or a corner), or a soup's x1 .. z3 per triangle
+        nverts = B.list_length(V[0])
+        points, step = [tuple(item(i, V[3 * c + a]) for a in range(3)) for c in range(len(V) // 3)], 1
+    npoints = nverts if len(points) == 1 else B.list_length(px)
 
     def usable(v):  # vertex v in front of near, and no farther from the centre than the pen may go
         return and_(gt(item(v, pz), div(near, var("focal"))),
@@ -391,7 +445,7 @@ def _camera_blocks(r: ReaderBuilder) -> None:
                                                  mul(SAFE_X, depth)))),
         B.if_(eq(var("_safe"), 0), [
             r.set("_i", 1),
-            B.repeat(nverts, [B.if_(not_(usable(i)), [B.replace_item(px, i, UNUSABLE_X)]), r.change("_i", 1)]),
+            B.repeat(npoints, [B.if_(not_(usable(i)), [B.replace_item(px, i, UNUSABLE_X)]), r.change("_i", 1)]),
         ]),
     ]
     r.define("project vertices", [], [
@@ -401,47 +455,65 @@ def _camera_blocks(r: ReaderBuilder) -> None:
         r.set("_spf", div(spt, var("focal"))), r.set("_cpf", div(cpt, var("focal"))),
         B.delete_all(px), B.delete_all(py), B.delete_all(pz),
         r.set("_i", 1),
-        B.repeat(nverts, [
-            r.set("_dx", sub(item(i, m.verts), var("cam x"))),
-            r.set("_dy", sub(item(add(i, 1), m.verts), var("cam y"))),
-            r.set("_dz", sub(item(add(i, 2), m.verts), var("cam z"))),
+        B.repeat(nverts, [*(node for x, y, z in points for node in (
+            r.set("_dx", sub(x, var("cam x"))),
+            r.set("_dy", sub(y, var("cam y"))),
+            r.set("_dz", sub(z, var("cam z"))),
             r.set("_z1", add(mul(dx, syw), mul(dz, cyw))),
             r.set("_z2", add(mul(dy, var("_spf")), mul(z1, var("_cpf")))),
             B.add_to(pz, z2),
             B.add_to(px, div(sub(mul(dx, cyw), mul(dz, syw)), z2)),
-            B.add_to(py, div(sub(mul(dy, cpt), mul(z1, spt)), z2)),
-            r.change("_i", 3),
+            B.add_to(py, div(sub(mul(dy, cpt), mul(z1, spt)), z2)))),
+            r.change("_i", step),
         ]),
         *safe,
     ])
 
 
 # ---- the frame
+def _triangle_walk(m: MeshNames) -> str:
+    """How ``_b`` walks the triangles: ``book`` the items of one list of records (4 a
+    triangle), ``split`` the triangle's number in per-corner lists, ``soup`` its corners'
+    projected points (3 a triangle)."""
+    return "soup" if m.soup else "book" if isinstance(m.tris, str) else "split"
+
+
 def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
-    """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring)."""
+    """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring;
+    :func:`_triangle_walk` for the other layouts)."""
     m = r.spec.mesh
+    walk = _triangle_walk(m)
     px, py = "_px", "_py"
     b = r.v("_b")
     ax, ay, bx, by, cx, cy = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
     a2 = r.v("_a")
-    # corner a's items are read at _b, b's at _b + 1, c's at _b + 2: _b steps along the record
-    # (one change instead of an add per corner and no index variables); it ends at c's item
+    # book: corner a's items are read at _b, b's at _b + 1, c's at _b + 2: _b steps along the record
+    # (one change instead of an add per corner and no index variables); it ends at c's item.
+    # soup: the same along the corners' projected points; split: _b is the triangle
     load: list[B.Node] = []
     for k, name in ((1, "a"), (2, "b"), (3, "c")):
-        load += [r.set(f"_{name}x", item(item(b, m.tris), px)), r.set(f"_{name}y", item(item(b, m.tris), py))]
-        if k < 3:
+        point = b if walk == "soup" else _index(m, item(b, m.tris if walk == "book" else m.tris[k - 1]))
+        load += [r.set(f"_{name}x", item(point, px)), r.set(f"_{name}y", item(point, py))]
+        if k < 3 and walk != "split":
             load.append(r.change("_b", 1))
+    if walk == "book":
+        t, material = div(add(b, 1), 4), _index(m, item(add(b, 1), m.tris))
+    elif walk == "split":
+        t, material = b, _index(m, item(b, m.tris[3]))
+    else:
+        t = div(b, 3)
+        material = _index(m, item(t, m.tris))
     load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
     if _two_sided(r.spec):
         two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
-        load.append(B.if_(eq(item(item(add(b, 1), m.tris), two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
+        load.append(B.if_(eq(item(material, two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
     # an unusable corner's x is UNUSABLE_X; usable ones are within SAFE_X of the centre, so the
     # sum of |x| is below 3 * SAFE_X exactly when all three are usable
     unusable = gt(add(add(B.abs_(ax), B.abs_(bx)), B.abs_(cx)), 3 * SAFE_X)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
     # the pen's colour is set only when it changes (a colour set costs TurboWarp more than the test)
     c, pc = r.v("_c"), r.v("_pc")
-    colour = [r.set("_c", _colour(r, div(add(b, 1), 4), item(add(b, 1), m.tris))),
+    colour = [r.set("_c", _colour(r, t, material)),
               B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
     # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
     # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
@@ -468,6 +540,8 @@ def _render_blocks(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     k = r.v("_k")
     fill = _fill_blocks(r)
+    walk = _triangle_walk(m)
+    step = 2 if walk == "book" else 1  # to the next triangle's first item (the fill moved 2 in book and soup)
     start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size), r.set("_pc", "")]
     # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
     start.append(B.switch_costume("fence"))
@@ -478,13 +552,16 @@ def _render_blocks(r: ReaderBuilder) -> None:
             B.call("bsp walk"),
             r.set("_k", 1),
             B.repeat(div(B.list_length(ranges), 2), [
-                r.set("_b", sub(mul(item(k, ranges), 4), 3)),
-                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", 2)]),
+                r.set("_b", {"book": lambda f: sub(mul(f, 4), 3), "split": lambda f: f,
+                             "soup": lambda f: sub(mul(f, 3), 2)}[walk](item(k, ranges))),
+                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", step)]),
                 r.change("_k", 2),
             ]),
         ]
     else:  # no tree: the list's order
-        frame = [r.set("_b", 1), B.repeat(div(B.list_length(m.tris), 4), [*fill, r.change("_b", 2)])]
+        count = {"book": lambda: div(B.list_length(m.tris), 4), "split": lambda: B.list_length(m.tris[0]),
+                 "soup": lambda: B.list_length(m.tris)}[walk]()
+        frame = [r.set("_b", 1), B.repeat(count, [*fill, r.change("_b", step)])]
     r.define("render", [], start + frame)
 
 

@@ -53,15 +53,23 @@ def bake_to(model: Path, out: Path, sections: dict) -> Path:
     return out / name
 
 
-def _preview(sb3_path: Path):
+# layouts for authors' engines (docs/engines.md): the reader draws from the lists as written
+PER_COORDINATE = {"names": {"vertices": ["X", "Y", "Z"], "triangles": ["tri a", "tri b", "tri c", "tri mat"]},
+                  "index_base": 0}
+SOUP_XYZ = {"faces": "soup", "names": {"vertices": ["X", "Y", "Z"]}}
+LAYOUTS = {"suzanne x y z": PER_COORDINATE, "teapot soup": SOUP_XYZ}
+
+
+def _preview(sb3_path: Path, export: dict | None = None):
     project, assets = sb3.load_project(sb3_path)
     lists = {n: items for t in project["targets"] for n, items in (t.get("lists") or {}).values()}
     sprite = next(t for t in project["targets"] if t["name"] == "Mesh")
     two = lists.get("mat two-sided") or [0] * len(lists.get("mat colors", []))
-    report = {"config": {"export": {"names": {}}}, "materials": [{"double_sided": bool(x)} for x in two]}
+    export = export or {"names": {}}
+    report = {"config": {"export": export}, "materials": [{"double_sided": bool(x)} for x in two]}
     mesh = preview.mesh_from_lists(lists, report)
     mesh.backdrop = backdrop.from_project(project, assets)  # what the stage shows where nothing is drawn
-    cam = auto_camera(lists["verts"])
+    cam = auto_camera(mesh.verts)
     variables = {n: v for n, v in sprite["variables"].values()}
     assert [variables["cam x"], variables["cam yaw"]] == [cam.x, cam.yaw]  # the green flag's camera
     return (*preview.stage_view(mesh, cam), mesh.backdrop)
@@ -79,15 +87,18 @@ def played(tmp_path_factory):
     teapot = CORPUS / "teapot_obj" / "teapot.obj"
     if teapot.exists():
         projects.append(("teapot", bake_to(teapot, tmp / "teapot", TEAPOT)))
+        # the lit BSP teapot from soup lists (x, y, z per corner): the walk's ranges over corners
+        projects.append(("teapot soup", bake_to(teapot, tmp / "teapot soup", {**TEAPOT, "export": SOUP_XYZ})))
     suzanne = CORPUS / "suzanne_obj" / "suzanne.obj"
     if suzanne.exists():  # no BSP tree, material colours: the list's order, culled on the stage
         projects.append(("suzanne", bake_to(suzanne, tmp / "suzanne", {})))
+        projects.append(("suzanne x y z", bake_to(suzanne, tmp / "suzanne xyz", {"export": PER_COORDINATE})))
     box = CORPUS / "box_textured_gltf_separate" / "BoxTextured.gltf"
     if box.exists():  # textured by default; white and unlit with its texture off (a dark backdrop)
         projects.append(("box", bake_to(box, tmp / "box", {})))
         projects.append(("white box", bake_to(box, tmp / "white", {"textures": {"enabled": False}})))
     run = turbowarp.run(projects, modes=("compiled", "interpreted"), repeat=1)
-    return {"run": run, "projects": dict(projects), "previews": {k: _preview(p) for k, p in projects}}
+    return {"run": run, "projects": dict(projects), "previews": {k: _preview(p, LAYOUTS.get(k)) for k, p in projects}}
 
 
 def test_every_project_runs_without_errors_and_draws(played):

@@ -68,6 +68,21 @@ def test_parallel_lists_left_behind_are_named(tmp_path):
     assert code == 4
 
 
+def test_split_vertex_lists_replace_x_y_z_and_name_only_the_lists_left_beside_them(tmp_path):
+    """export.names.vertices = ["X", "Y", "Z"] writes all three coordinates: the engine's per-vertex
+    colour and size lists, of the old length, are the parallel lists left behind; Y and Z are not."""
+    five = list(range(5))  # (the cube has 8 vertices)
+    path = _write(tmp_path / "xyz.sb3", {"X": five, "Y": five, "Z": five, "colour": five, "size": five}, {},
+                  _draw_xyz() + [B.set_var("i", B.item(1, "colour")), B.set_var("i", B.item(1, "size"))])
+    code, rep = _bake(tmp_path, path, 'export.names.vertices=["X", "Y", "Z"]')
+    eng = _export(rep)["details"]["into"]["engine"]
+    assert code == 0 and eng["parallel"] == {"X": ["colour", "size"], "Y": ["colour", "size"],
+                                             "Z": ["colour", "size"]}
+    assert all(eng["lists"][n]["replaced"] for n in "XYZ") and "X" not in eng["unread"]
+    warned = [w for w in _export(rep)["warnings"] if "beside it" in w]
+    assert warned and all("'colour'" in w and "'size'" in w and "'Y'" not in w.split("beside")[1] for w in warned)
+
+
 def test_a_list_no_block_reads_is_named_and_a_read_one_is_not(tmp_path):
     path = _write(tmp_path / "points.sb3", {"verts": [1, 2, 3]}, {},
                   [B.set_var("i", B.item(1, "verts"))])

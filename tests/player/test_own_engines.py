@@ -4,12 +4,19 @@ played in TurboWarp.
 Three engines (tests/player/engines.py), each a sprite whose green flag draws the model with the
 pen from its own stage lists: per-coordinate lists with 0-based corners, an unindexed triangle
 soup, and the book's interleaved ``verts``/``tris``. For each, the engine's .sb3 is written, the
-corpus Suzanne is baked into it (``export.into``, ``into_target = "Stage"``, the layout's
-``export`` settings), the bake's engine check must find nothing to say, and the merged project
-runs in TurboWarp (compiled and interpreted). Its stage must agree with the green-flag preview of
-a default-layout bake of the same model (``bake.outputs.preview.stage_agreement``) at the
-thresholds of test_turbowarp.py: the engines draw in list order with back-face culling, which
-for the unlit Suzanne (one colour) is a correct picture.
+model is baked into it (``export.into``, ``into_target = "Stage"``, the layout's ``export``
+settings), the bake's engine check must find nothing to say, and the merged project runs in
+TurboWarp (compiled and interpreted, one run for all). Its stage must agree with the green-flag
+preview of a default-layout bake of the same model (``bake.outputs.preview.stage_agreement``) at
+the thresholds of test_turbowarp.py. The engines draw in list order with back-face culling, which
+is a correct picture for the unlit corpus Suzanne (one colour) and for a convex model: a lit
+icosphere, a colour per triangle, baked into the two engines that read a colour per triangle
+(the book's layout colours by material; the bake would add an unread ``tri colors`` beside it).
+
+Controls: a mirrored stage and the per-coordinate engine baked with 1-based corners fail the
+agreement; a default-layout bake into the per-coordinate engine makes the engine check speak.
+The engines that need the export layouts (``export.names`` lists, ``index_base``, ``faces =
+"soup"``) are skipped where ``bake.config.ExportConfig`` has no ``index_base``.
 """
 
 from __future__ import annotations
@@ -119,12 +126,21 @@ def played(tmp_path_factory):
         projects.append((pid, folder / out))
     if not projects:
         pytest.skip("no model of the corpus")
+    wrong = None
+    if "per-coordinate-suzanne" in built:  # a control: the 0-based engine given 1-based corners
+        b = built["per-coordinate-suzanne"]
+        export = {**LAYOUTS["per-coordinate"], "index_base": 1, "into": str(b["source"]), "into_target": "Stage",
+                  "into_name": "one-based.sb3"}
+        _, files = _bake(CORPUS / MODELS["suzanne"][0], MODELS["suzanne"][1], export)
+        wrong = tmp / "one-based.sb3"
+        wrong.write_bytes(files["one-based.sb3"])
+        projects.append(("one-based", wrong))
     t0 = time.monotonic()
     run = turbowarp.run(projects, modes=("compiled", "interpreted"))
     seconds = time.monotonic() - t0
     print(f"\nTurboWarp: {len(projects)} projects x 2 modes in {seconds:.1f} s; green flag to done: "
           + ", ".join(f"{r.id} {r.mode} {r.seconds[0]:.2f} s" for r in run.results if r.seconds))
-    return {"refs": refs, "built": built, "run": run, "seconds": seconds}
+    return {"refs": refs, "built": built, "run": run, "seconds": seconds, "one-based": wrong}
 
 
 def _built(played, engine: str, model: str) -> dict:
@@ -210,3 +226,29 @@ def test_a_mirrored_stage_fails_the_agreement(played):
         bad = np.ascontiguousarray(played["run"].get(pid, "compiled").image[:, ::-1])
         a = preview.stage_agreement(bad, ref["view"], ref["painter"], background=WHITE)
         assert a["covered_within_1"] < COVERED_WITHIN_1 or a["within_1"] < 1.0 or a["empty_painted"] > 0, (pid, a)
+
+
+def test_the_wrong_index_base_fails_the_agreement(played):
+    """The stage tells the layouts apart: the per-coordinate engine (0-based corners) baked with
+    export.index_base = 1 runs without an error but draws another picture."""
+    if played["one-based"] is None:
+        pytest.skip("the per-coordinate engine was not baked")
+    ref = played["refs"]["suzanne"]
+    for mode in ("compiled", "interpreted"):
+        r = played["run"].get("one-based", mode)
+        assert r.errors == [] and r.done, (mode, r.errors)
+        a = preview.stage_agreement(r.image, ref["view"], ref["painter"], background=WHITE)
+        assert a["covered_within_1"] < COVERED_WITHIN_1 or a["within_1"] < 1.0 or a["empty_painted"] > 0, (mode, a)
+
+
+def test_the_engine_check_speaks_when_the_layout_is_not_the_engines(played):
+    """A default-layout bake into the per-coordinate engine: the check names the lists no block
+    reads (the silence above means something)."""
+    _skip_without_layouts("per-coordinate")
+    b = played["built"].get("per-coordinate-suzanne")
+    if b is None:
+        pytest.skip("the per-coordinate engine was not baked")
+    res, _ = _bake(CORPUS / MODELS["suzanne"][0], {}, {"into": str(b["source"]), "into_target": "Stage"})
+    found = next(r for r in res.records if r.name == "export").details["into"]["engine"]
+    assert found["unread"] == ["tris", "verts"], found
+    assert len(found["warnings"]) == 1 and "'tris', 'verts'" in found["warnings"][0], found["warnings"]

@@ -252,9 +252,10 @@ def check(proj: dict, target: str, written: dict[str, int], *, reader_added: boo
     warnings: list[str] = []
     unread = sorted(n for n in written if not table[n]["read_by"] and not table[n]["named_by"])
     if unread and not reader_added:
+        it = "it" if len(unread) == 1 else "them"
         warnings.append(f"export.into: no block of the project reads {_names(unread)}: the engine will not see "
-                        f"{'it' if len(unread) == 1 else 'them'} (rename them under [export.names] to the lists "
-                        "the engine reads, or add a block that reads them)")
+                        f"{it} (rename {it} under [export.names] to the lists the engine reads, or add a block that "
+                        f"reads {it})")
     by_owner = {o.name: o for o in owners}
     parallel: dict[str, list[str]] = {}
     written_refs = set(back)

@@ -137,11 +137,13 @@ def _read_project(project: Path) -> dict | None:
         return None
 
 
-def _list_names(proj: dict | None, targets: Any = None) -> set[str]:
-    """Names of the lists of ``proj``'s targets (those ``targets(t)`` accepts, or all)."""
+def _list_names(proj: dict | None, targets: Any = None, non_empty: bool = False) -> set[str]:
+    """Names of the lists of ``proj``'s targets (those ``targets(t)`` accepts, or all; with
+    ``non_empty`` only lists holding items)."""
     return {e[0] for t in (proj or {}).get("targets", []) or []
             if isinstance(t, dict) and (targets is None or targets(t))
-            for e in (t.get("lists") or {}).values() if isinstance(e, list) and e and isinstance(e[0], str)}
+            for e in (t.get("lists") or {}).values() if isinstance(e, list) and e and isinstance(e[0], str)
+            and (not non_empty or (len(e) > 1 and isinstance(e[1], list) and len(e[1]) > 0))}
 
 
 def _bake_list_names(cfg: Any) -> set[str]:
@@ -156,8 +158,9 @@ def _bake_list_names(cfg: Any) -> set[str]:
 def _stale_lists(proj: dict | None, target: str, written: dict[str, list], cfg: Any) -> list[str]:
     """Lists of an earlier bake that a project baked into keeps because this bake does not write
     them (a BSP tree of another model, colours the new model does not have): the stage's and the
-    target sprite's lists with a bake's list name that is not among ``written``."""
-    seen = _list_names(proj, lambda t: t.get("isStage") or t.get("name") == target)
+    target sprite's non-empty lists with a bake's list name that is not among ``written`` (an
+    empty one holds no earlier model)."""
+    seen = _list_names(proj, lambda t: t.get("isStage") or t.get("name") == target, non_empty=True)
     return sorted(seen & (_bake_list_names(cfg) - set(written)))
 
 

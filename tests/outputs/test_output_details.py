@@ -158,7 +158,8 @@ def test_bake_into_warns_of_lists_an_earlier_bake_left_there(tmp_path, capsys):
     colors' of the old model. The bake now names every such list it leaves (the stage's and the
     target sprite's; not another sprite's, not the author's own lists) and keeps them untouched."""
     model = textured(tmp_path / "m")
-    old = {"bsp nodes": [1, 2, 3], "bsp planes": [0.5], "tri colors": [7], "my list": [1], "verts": [0, 0, 0]}
+    old = {"bsp nodes": [1, 2, 3], "bsp planes": [0.5], "tri colors": [7], "my list": [1], "verts": [0, 0, 0],
+           "lightmap uvs": []}  # (an empty list of a bake's name holds no earlier model: not named)
     data, _ = sb3_mod.write_sb3([sb3_mod.Target("Stage", is_stage=True, lists=dict(old)),
                                  sb3_mod.Target("Other", layer_order=1, lists={"bvh nodes": [1]})])
     (tmp_path / "engine.sb3").write_bytes(data)

@@ -154,6 +154,7 @@ class Artefacts:
     # lighting: its result (``bake.lighting`` colours and effects) and the baked lightmap (uint8 RGBA)
     lighting: Any = None
     lightmap_image: Any = None
+    lightmap_encoded: Any = None  # its lists and costume (bake.textures.encode.EncodedTexture)
     # bsp / bvh: the tree, its list names and encoding (read by the reader sprite and the previews)
     bsp: BSPArtefact | None = None
     bvh: BVHArtefact | None = None

@@ -463,6 +463,10 @@ class ExportConfig:
     # material list): 1 (Scratch's items) or 0 (engines that add 1 when they read). The BSP and BVH
     # lists keep Scratch's 1-based item and triangle numbers (their walk blocks address items).
     index_base: int = 1
+    # The reader sprite's textured filler (docs/formats-textures.md, "Drawing a textured triangle"):
+    # with a texture or a lightmap in the project, the green flag draws every triangle by square
+    # cells of this many stage pixels, each the nearest texel at its centre; 0 = flat colours only.
+    texel_size: int = 2
     # Positions are rounded to this many significant digits of the model's size: a step of the
     # largest power of ten <= diagonal * 10^-precision (never coarser than 1; docs/formats.md;
     # bake.scratch.numbers.position_decimals, the grid the BSP builds on too).
@@ -507,6 +511,9 @@ class ExportConfig:
 
     def check(self, need: Need) -> None:
         need(1 <= self.precision <= 15, "precision", "must be between 1 and 15")
+        need(self.texel_size in (0, 1, 2, 3, 4, 5, 6, 8, 10, 12), "texel_size",
+             f"must divide the stage's 480 x 360 pixels: 1, 2, 3, 4, 5, 6, 8, 10 or 12 (0 = flat colours only; "
+             f"got {self.texel_size!r})")
         need(self.index_base in (0, 1) and not isinstance(self.index_base, bool), "index_base",
              f"must be 1 (Scratch's first item) or 0 (got {self.index_base!r})")
         for key, why in split_problems(self.names, self.faces):

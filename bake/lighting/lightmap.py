@@ -179,5 +179,5 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
     figs.update({"output": output, "seam_error_8bit": q["max"], "rays": ray_stats(),
                  "encodings": {e: {**enc.sizes[e], "written": written[e]} for e in ENCODINGS},
                  "seconds": round(time.perf_counter() - t0, 6)})
-    scene = scene.with_artefacts(lightmap_image=img8)
+    scene = scene.with_artefacts(lightmap_image=img8).with_artefacts(lightmap_encoded=enc)
     return scene, figs

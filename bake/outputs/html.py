@@ -230,6 +230,25 @@ def _views_section(views: list, mesh) -> str:
     return "".join(parts)
 
 
+def _textured_section(lists: dict, report: dict, mesh) -> str:
+    """The green flag of a textured bake: the reader's textured filler, cell by cell
+    (``bake.outputs.cells``), on the stage's backdrop."""
+    from . import cells
+
+    found = cells.green_flag(lists, report)
+    if found is None:
+        return ""
+    pic, _ = found
+    img = pic.image(background=mesh.backdrop)
+    n = int((pic.colour >= 0).sum())
+    return (f"<h3 style='font-size:14px;margin:14px 0 4px'>green flag, textured: {n:,} cells of {pic.cell} x "
+            f"{pic.cell} pixels</h3><p class=sub>What the reader sprite's textured filler draws on the stage "
+            f"(export.texel_size = {pic.cell}): each cell the nearest texel at its centre, perspective-correct, in the "
+            f"painter's order (docs/formats-textures.md, \"Drawing a textured triangle\"); the player suite "
+            f"compares TurboWarp's stage with this picture.</p><div class=views><figure><img alt='textured green flag' "
+            f"src='{png_data_uri(img)}'><figcaption>textured filler, 480 x 360</figcaption></figure></div>")
+
+
 def _textures_section(textures: list[dict]) -> str:
     if not textures:
         return ""
@@ -486,6 +505,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     body = [head, _limits_section(report)]
     if views:
         body.append(_views_section(views, mesh))
+        body.append(_textured_section(lists, report, mesh))
     else:
         why = ("the export stage was off (export.enabled = false)" if not ex.get("enabled", True) else
                f"{json_name} was not written (export.json = false)" if not has_json else

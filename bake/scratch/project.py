@@ -22,6 +22,7 @@ from . import readers
 from . import textimage
 from .check import check_packed_lists
 from .layout import join
+from .reader_texture import TextureSource, TextureSpec
 from .loader import LoaderPart, LoaderSpec
 
 
@@ -112,7 +113,54 @@ def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.Reader
     two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
     return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),
                               textimage=has_textimage(values), renderer=True, camera=cam, two_sided=two,
-                              bounds=readers.bounding_sphere(book["vertices"]) if mesh else None)
+                              bounds=readers.bounding_sphere(book["vertices"]) if mesh else None,
+                              texture=texture_spec(scene, cfg, values) if mesh else None)
+
+
+def texture_spec(scene: Any, cfg: Any, values: dict[str, list]) -> TextureSpec | None:
+    """The textured filler's sources (``reader_texture.py``), or None: the lightmap for every
+    triangle when the bake wrote it and its UVs; else each material's texture (its colour list, or
+    its TextImage string) through ``tri uvs``; None when no drawn triangle has a texture in the
+    project, or ``export.texel_size = 0``."""
+    cell = int(_cfg(cfg, "texel_size", 0) or 0)
+    if not cell or scene is None:
+        return None
+    n = cfg.names
+    n_mat = max(len(getattr(scene, "materials", ())), 1)
+    arts = scene.artefacts
+
+    def source(enc, name: str, image) -> TextureSource | None:
+        H, W = image.shape[:2]
+        lists = {e: [lst.name for lst in enc.lists.get(e, [])] for e in ("list", "textimage")}
+        if lists["list"] and lists["list"][0] in values:
+            return TextureSource("list", lists["list"][0], W, H, enc.first_row)
+        if lists["textimage"] and lists["textimage"][0] in values:
+            return TextureSource("textimage", lists["textimage"][0], W, H, "bottom")
+        return None
+
+    lm_enc = getattr(arts, "lightmap_encoded", None)
+    if isinstance(n.lightmap_uvs, str) and n.lightmap_uvs in values and lm_enc is not None:
+        src = source(lm_enc, "lightmap", lm_enc.image)
+        if src is not None:
+            return TextureSpec([src], [0] * n_mat, n.lightmap_uvs, cell)
+    tex = arts.textures
+    if tex is None or not isinstance(n.uvs, str) or n.uvs not in values:
+        return None
+    sources: list[TextureSource] = []
+    per_mat = [-1] * n_mat
+    for t in tex.textures:
+        if t.encoded is None or t.image is None:
+            continue
+        src = source(t.encoded, t.name, t.image)
+        if src is None:
+            continue
+        for m in t.materials:
+            if 0 <= m < n_mat:
+                per_mat[m] = len(sources)
+        sources.append(src)
+    if not sources:
+        return None
+    return TextureSpec(sources, per_mat, n.uvs, cell)
 
 
 def _one_or_tuple(value: str | list[str]) -> str | tuple[str, ...]:
@@ -212,6 +260,8 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
     spec = _with_loader(plain_spec, packed, packed_name)
     stored = packed_values(values, packed, packed_name)
     details = record.details if record is not None else {}
+    if plain_spec is not None and plain_spec.texture is not None:  # what the textured filler reads
+        details["reader_texture"] = plain_spec.texture.to_json()
     costumes = texture_costumes(scene)
     if cfg.sb3:
         sb3_name = _cfg(cfg, "sb3_name", "") or f"{name}.sb3"

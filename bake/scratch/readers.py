@@ -89,6 +89,7 @@ from . import sb3
 from . import blocks as B
 from .blocks import add, div, eq, gt, item, lt, mul, not_, and_, sub, var
 from .reader_bvh import BIG, bvh_part
+from .reader_texture import TextureSpec, cell_fill, load_blocks
 from .reader_textimage import alphabet_costumes, textimage_part
 
 __all__ = ["MeshNames", "BVHSpec", "BSPSpec", "Camera", "ReaderSpec", "ReaderBuilder", "reader_target",
@@ -180,6 +181,8 @@ class ReaderSpec:
     helpers: bool = False
     pen_size: float = 2.0
     parts: list[Callable[["ReaderBuilder"], None]] = field(default_factory=list)
+    # the textured filler (reader_texture.py): with it, every triangle is drawn by cells
+    texture: TextureSpec | None = None
 
     def lists_read(self) -> list[str]:
         """The data lists the blocks read (they must exist in the project)."""
@@ -191,6 +194,8 @@ class ReaderSpec:
             out += [self.bvh.nodes, self.bvh.tris, self.bvh.ids]
         if self.bsp and self.mesh:
             out += [self.bsp.nodes, self.bsp.planes]
+        if self.texture and self.mesh and self.renderer:
+            out += self.texture.lists_read()
         out += [n for p in self.parts for n in getattr(p, "lists_read", lambda: [])()]
         return out
 
@@ -491,8 +496,14 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     # (one change instead of an add per corner and no index variables); it ends at c's item.
     # soup: the same along the corners' projected points; split: _b is the triangle
     load: list[B.Node] = []
+    textured = r.spec.texture is not None
+    corners = []  # (textured) each corner's projected point, kept for its depth
     for k, name in ((1, "a"), (2, "b"), (3, "c")):
         point = b if walk == "soup" else _index(m, item(b, m.tris if walk == "book" else m.tris[k - 1]))
+        if textured:
+            load.append(r.set(f"_v{name}", point))
+            point = r.v(f"_v{name}")
+            corners.append(point)
         load += [r.set(f"_{name}x", item(point, px)), r.set(f"_{name}y", item(point, py))]
         if k < 3 and walk != "split":
             load.append(r.change("_b", 1))
@@ -533,6 +544,8 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
         B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
         B.pen_up(),
     ]
+    if textured:
+        fill = cell_fill(r, r.spec.texture, t, material, _colour(r, t, material), corners)
     return load + [B.if_(lt(a2, 0), fill)]
 
 
@@ -542,7 +555,12 @@ def _render_blocks(r: ReaderBuilder) -> None:
     fill = _fill_blocks(r)
     walk = _triangle_walk(m)
     step = 2 if walk == "book" else 1  # to the next triangle's first item (the fill moved 2 in book and soup)
-    start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(r.spec.pen_size), r.set("_pc", "")]
+    textured = r.spec.texture is not None
+    start = [B.hide(), B.pen_up(), B.pen_clear(), B.set_pen_size(1 if textured else r.spec.pen_size),
+             r.set("_pc", "")]
+    if textured:  # the textures' colours into _tex, once
+        r.define("load textures", [], load_blocks(r, r.spec.texture))
+        start.append(B.if_(eq(B.list_length(r.lst("_tex")), 0), [B.call("load textures")]))
     # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
     start.append(B.switch_costume("fence"))
     start.append(B.call("project vertices"))

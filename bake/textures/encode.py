@@ -63,6 +63,7 @@ class EncodedTexture:
     lists: dict[str, list[ScratchList]] = field(default_factory=dict)  # encoding -> its lists
     costume: tuple[str, bytes] | None = None
     sizes: dict[str, dict] = field(default_factory=dict)  # encoding -> figures
+    first_row: str = "bottom"  # the colour list's first row: the image's "bottom" or "top"
 
 
 def _list_cost(lst: ScratchList) -> tuple[int, int, int]:
@@ -80,7 +81,7 @@ def encode_texture(name: str, image: np.ndarray, *, list_name: str, size_list_na
     """All three encodings of ``image`` ((H, W, 4) uint8, row 0 at the top) and their sizes."""
     img = np.ascontiguousarray(np.asarray(image, dtype=np.uint8))
     H, W = img.shape[:2]
-    out = EncodedTexture(name=name, image=img)
+    out = EncodedTexture(name=name, image=img, first_row=first_row)
 
     vals = colors.image_to_list(img, color_format, first_row=first_row)
     if color_format == "hex":

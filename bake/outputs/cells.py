@@ -1,0 +1,247 @@
+"""The textured filler's picture in Python: what the reader sprite's ``render`` draws cell by cell
+(``bake.scratch.reader_texture``) when the bake wrote a texture or a lightmap, with the blocks'
+arithmetic in the blocks' order (doubles, as JavaScript computes them), so report.html's
+green-flag preview of a textured bake and the player suite's comparison show what the stage will
+show.
+
+Vectorised over (triangle, cell row) pairs and their cells; the per-cell steps of ``q``, ``U`` and
+``V`` are summed left to right (``np.add.accumulate``), as the blocks add them, and the painter's
+order decides each cell (the last triangle drawn there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..scratch import readers
+from ..scratch.colors import decode_numbers
+from ..scratch.reader_texture import STAGE_H, STAGE_W, TextureSpec, grid
+
+
+@dataclass
+class CellPicture:
+    """The frame: ``colour`` (rows, cols) colour numbers of the cells (-1: nothing drawn),
+    ``tri`` the 0-based triangle that drew each cell (-1), ``cell`` the cell size."""
+
+    colour: np.ndarray
+    tri: np.ndarray
+    cell: int
+
+    def image(self, background=(255, 255, 255)) -> np.ndarray:
+        """(360, 480, 3) uint8: each drawn cell's pixels in its colour."""
+        s = self.cell
+        rgb = np.empty(self.colour.shape + (3,), np.uint8)
+        rgb[:] = np.asarray(background, np.uint8)[:3]
+        drawn = self.colour >= 0
+        if drawn.any():
+            rgb[drawn] = decode_numbers(self.colour[drawn])[:, :3].astype(np.uint8)
+        return np.repeat(np.repeat(rgb, s, axis=0), s, axis=1)
+
+    def painted(self) -> np.ndarray:
+        """(360, 480) bool: the pixels the filler paints."""
+        s = self.cell
+        return np.repeat(np.repeat(self.colour >= 0, s, axis=0), s, axis=1)
+
+
+def texture_colours(spec: TextureSpec, lists: dict[str, list]) -> np.ndarray:
+    """``_tex`` as the sprite loads it: every source's colour numbers, one after another."""
+    from ..scratch import colors, textimage
+
+    parts = []
+    for s in spec.sources:
+        if s.kind == "textimage":  # ``ti colors``: bottom row first, argb with an alpha layer
+            img = textimage.decode(lists[s.list][0])
+            mode = "argb" if img.ndim == 3 and img.shape[2] == 4 else "rgb"
+            parts.append(np.asarray(colors.image_to_list(img, mode, first_row="bottom"), np.int64))
+        else:
+            parts.append(np.asarray(decode_colour_items(lists[s.list]), np.int64))
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)
+
+
+def decode_colour_items(items: Sequence[Any]) -> list[int]:
+    """Colour list items (numbers, or "#rrggbb" strings) as numbers."""
+    out = []
+    for x in items:
+        if isinstance(x, str) and x.startswith("#"):
+            h = x[1:]
+            if len(h) == 3:
+                h = "".join(c * 2 for c in h)
+            out.append(int(h, 16))
+        else:
+            out.append(int(float(x)))
+    return out
+
+
+def _scratch_mod(a: np.ndarray, m: np.ndarray) -> np.ndarray:
+    r = np.fmod(a, m)
+    return np.where((r != 0) & ((r < 0) != (m < 0)), r + m, r)
+
+
+def picture(verts: np.ndarray, tris: np.ndarray, order: np.ndarray, cam: readers.Camera, spec: TextureSpec,
+            uvs: Sequence[float], tex: np.ndarray, flat: np.ndarray, material: np.ndarray,
+            two_sided: Sequence[int] = ()) -> CellPicture:
+    """The cells ``render`` paints. ``verts`` (V, 3) and ``tris`` (T, 4, 1-based) the book's lists;
+    ``order``: 0-based triangles in the order the frame visits them (the BSP walk's ranges, or
+    the list); ``uvs``: the UV list the filler reads (6 a triangle); ``tex``: ``_tex``
+    (:func:`texture_colours`); ``flat``: each triangle's flat colour number; ``material``: each
+    triangle's 0-based material."""
+    s = spec.cell
+    rows_n, cols_n = STAGE_H // s, STAGE_W // s
+    colour = np.full((rows_n, cols_n), -1, np.int64)
+    owner = np.full((rows_n, cols_n), -1, np.int64)
+    t = np.asarray(tris, np.int64).reshape(-1, 4)
+    px, py, pz = readers.project(np.asarray(verts, np.float64).reshape(-1, 3), cam)
+    ok = readers.drawn(np.asarray(verts, np.float64).reshape(-1, 3), t, cam, two_sided)
+    order = np.asarray(order, np.int64)
+    order = order[ok[order]] if len(order) else order
+    if not len(order):
+        return CellPicture(colour, owner, s)
+    i = t[order, :3] - 1
+    ax, ay, bx, by, cx, cy = px[i[:, 0]], py[i[:, 0]], px[i[:, 1]], py[i[:, 1]], px[i[:, 2]], py[i[:, 2]]
+    off_l, tw_l, th_l, top_l = (np.asarray(x) for x in spec.tables())
+    m = material[order]
+    toff = off_l[m].astype(np.float64)
+    tw, th, top = tw_l[m].astype(np.float64), th_l[m].astype(np.float64), top_l[m] == 1
+    textured = toff >= 0
+    den = ((bx - ax) * (cy - ay)) - ((by - ay) * (cx - ax))
+    uv = np.asarray(uvs, np.float64).reshape(-1, 6)[order] if len(uvs) else np.zeros((len(order), 6))
+    grads = {}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = [1.0 / pz[i[:, k]] for k in range(3)]
+        U = [(uv[:, 2 * k] * tw) * q[k] for k in range(3)]
+        V = [np.where(top, ((1.0 - uv[:, 2 * k + 1]) * th) * q[k], (uv[:, 2 * k + 1] * th) * q[k]) for k in range(3)]
+        for name, (fa, fb, fc) in (("q", q), ("U", U), ("V", V)):
+            fx = (((fb - fa) * (cy - ay)) - ((fc - fa) * (by - ay))) / den
+            fy = (((fc - fa) * (bx - ax)) - ((fb - fa) * (cx - ax))) / den
+            grads[name] = (fa, fx, fy)
+    ymin = np.minimum(np.minimum(ay, by), cy)
+    ymax = np.maximum(np.maximum(ay, by), cy)
+    D, C = grid(s)
+    j0 = np.maximum(np.ceil((C - ymax) / s), 0).astype(np.int64)
+    j1 = np.minimum(np.floor((C - ymin) / s), rows_n - 1).astype(np.int64)
+    # (triangle, row) pairs, in draw order and rows top to bottom
+    nrows = np.maximum(j1 - j0 + 1, 0)
+    pair_tri = np.repeat(np.arange(len(order)), nrows)
+    pair_row = j0[pair_tri] + (np.arange(int(nrows.sum())) - np.repeat(np.cumsum(nrows) - nrows, nrows))
+    k = pair_tri
+    Y = C - (s * pair_row.astype(np.float64))
+    xl = np.full(len(k), 1e9)
+    xr = np.full(len(k), -1e9)
+    P = [(ax[k], ay[k]), (bx[k], by[k]), (cx[k], cy[k])]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for (px_, py_), (qx_, qy_) in ((P[0], P[1]), (P[1], P[2]), (P[2], P[0])):
+            cross = (py_ != qy_) & ~(((py_ - Y) * (qy_ - Y)) > 0)
+            xe = px_ + (((Y - py_) * (qx_ - px_)) / (qy_ - py_))
+            xl = np.where(cross & (xe < xl), xe, xl)
+            xr = np.where(cross & (xe > xr), xe, xr)
+    i0 = np.maximum(np.ceil((xl - D) / s), 0).astype(np.int64)
+    i1 = np.minimum(np.floor((xr - D) / s), cols_n - 1).astype(np.int64)
+    n = np.maximum(i1 - i0 + 1, 0)
+    keep = n > 0
+    k, Y, i0, n, pair_row = k[keep], Y[keep], i0[keep], n[keep], pair_row[keep]
+    if not len(k):
+        return CellPicture(colour, owner, s)
+    X0 = (s * i0.astype(np.float64)) + D
+    # every cell of every pair: its colour
+    cell_pair = np.repeat(np.arange(len(k)), n)
+    within = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    cc = np.empty(len(cell_pair), np.int64)
+    tk = k[cell_pair]
+    flat_cells = ~textured[tk]
+    cc[flat_cells] = flat[order][tk[flat_cells]]
+    tex_pairs = np.flatnonzero(textured[k])
+    if len(tex_pairs):
+        width = int(n[tex_pairs].max())
+        acc = {}
+        for name in ("q", "U", "V"):
+            fa, fx, fy = grads[name]
+            kk = k[tex_pairs]
+            f0 = (fa[kk] + (fx[kk] * (X0[tex_pairs] - ax[kk]))) + (fy[kk] * (Y[tex_pairs] - ay[kk]))
+            steps = np.empty((len(tex_pairs), width))
+            steps[:, 0] = f0
+            steps[:, 1:] = (fx[kk] * s)[:, None]
+            acc[name] = np.add.accumulate(steps, axis=1)  # left to right, as `change by` adds them
+        sel = textured[tk]
+        rowpos = np.searchsorted(tex_pairs, cell_pair[sel])
+        col = within[sel]
+        qv, Uv, Vv = acc["q"][rowpos, col], acc["U"][rowpos, col], acc["V"][rowpos, col]
+        kt = tk[sel]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            idx = ((_scratch_mod(np.floor(Vv / qv), th[kt]) * tw[kt]) + _scratch_mod(np.floor(Uv / qv), tw[kt])) + \
+                (toff[kt] + 1.0)
+        idx_i = idx.astype(np.int64) - 1
+        good = (idx_i >= 0) & (idx_i < len(tex))
+        vals = np.zeros(len(idx_i), np.int64)  # (an item past the list is "": colour 0)
+        vals[good] = tex[idx_i[good]]
+        cc[sel] = vals
+    rows = pair_row[cell_pair]
+    cols = i0[cell_pair] + within
+    # painter's order: the last triangle to draw a cell decides it (cells are listed in draw order)
+    flat_idx = rows * cols_n + cols
+    last = np.unique(flat_idx[::-1], return_index=True)[1]
+    pick = len(flat_idx) - 1 - last
+    colour.ravel()[flat_idx[pick]] = cc[pick]
+    owner.ravel()[flat_idx[pick]] = order[tk[pick]]
+    return CellPicture(colour, owner, s)
+
+
+def green_flag(lists: dict[str, list], report: dict[str, Any]) -> tuple[CellPicture, Any] | None:
+    """The textured filler's green-flag frame of a bake (lists as written, report.json), and its
+    camera; None when the bake's reader has no textured filler."""
+    from ..bsp.traverse import draw_order
+    from ..scratch.layout import join
+    from ..scratch.project import auto_camera
+
+    export = next((st for st in report.get("stages", []) if st.get("name") == "export"), {})
+    spec_json = export.get("details", {}).get("reader_texture")
+    if not spec_json:
+        return None
+    spec = TextureSpec.from_json(spec_json)
+    ex = report.get("config", {}).get("export", {})
+    names = ex.get("names", {})
+    book = join(lists, names, ex.get("faces", "triangles"), ex.get("index_base", 1))
+    if "vertices" not in book or "triangles" not in book or spec.uvs not in lists:
+        return None
+    v = np.asarray(book["vertices"], np.float64).reshape(-1, 3)
+    t = np.asarray(book["triangles"], np.int64).reshape(-1, 4)
+    cam = auto_camera(v)
+    if "bsp nodes" in lists and "bsp planes" in lists:
+        order = np.asarray(draw_order(lists["bsp nodes"], lists["bsp planes"], (cam.x, cam.y, cam.z), cull=False),
+                           np.int64) - 1
+    else:
+        order = np.arange(len(t))
+    tname, mname = names.get("triangle_colors", "tri colors"), names.get("materials", "mat colors")
+    material = t[:, 3] - 1
+    if tname in lists and len(lists[tname]) == len(t):
+        flat = np.asarray(decode_colour_items(lists[tname]), np.int64)
+    elif mname in lists:
+        flat = np.asarray(decode_colour_items(lists[mname]), np.int64)[np.clip(material, 0, None)]
+    else:
+        flat = np.full(len(t), 0x808080, np.int64)
+    two = [1 if m.get("double_sided") else 0 for m in report.get("materials", [])]
+    pic = picture(v, t, order, cam, spec, lists[spec.uvs], texture_colours(spec, lists), flat, material, two)
+    return pic, cam
+
+
+def agreement(stage: np.ndarray, pic: CellPicture, background=(255, 255, 255)) -> dict[str, Any]:
+    """A player's stage (360, 480, 3 uint8) against the filler's picture: of the painted pixels,
+    the fractions within 1 and within 8 levels (largest channel difference; the pen's HSV round
+    trip moves a channel by 1, and a stroke next to a pixel drawn earlier tints it by about 1% of
+    their difference), and the pixels farther than one pixel from every painted one that are
+    not the background."""
+    want = pic.image(background)
+    painted = pic.painted()
+    d = np.abs(stage.astype(np.int16) - want.astype(np.int16)).max(axis=2)
+    near = painted.copy()
+    near[1:] |= painted[:-1]
+    near[:-1] |= painted[1:]
+    near[:, 1:] |= near[:, :-1].copy()
+    near[:, :-1] |= near[:, 1:].copy()
+    n = int(painted.sum())
+    return {"painted_pixels": n,
+            "within_1": float((d[painted] <= 1).mean()) if n else 0.0,
+            "within_8": float((d[painted] <= 8).mean()) if n else 0.0,
+            "empty_painted": int(((~near) & (d > 8)).sum())}

@@ -117,26 +117,59 @@ def picture(verts: np.ndarray, tris: np.ndarray, order: np.ndarray, cam: readers
             fx = (((fb - fa) * (cy - ay)) - ((fc - fa) * (by - ay))) / den
             fy = (((fc - fa) * (bx - ax)) - ((fb - fa) * (cx - ax))) / den
             grads[name] = (fa, fx, fy)
-    ymin = np.minimum(np.minimum(ay, by), cy)
-    ymax = np.maximum(np.maximum(ay, by), cy)
     D, C = grid(s)
-    j0 = np.maximum(np.ceil((C - ymax) / s), 0).astype(np.int64)
-    j1 = np.minimum(np.floor((C - ymin) / s), rows_n - 1).astype(np.int64)
-    # (triangle, row) pairs, in draw order and rows top to bottom
-    nrows = np.maximum(j1 - j0 + 1, 0)
-    pair_tri = np.repeat(np.arange(len(order)), nrows)
-    pair_row = j0[pair_tri] + (np.arange(int(nrows.sum())) - np.repeat(np.cumsum(nrows) - nrows, nrows))
-    k = pair_tri
-    Y = C - (s * pair_row.astype(np.float64))
-    xl = np.full(len(k), 1e9)
-    xr = np.full(len(k), -1e9)
-    P = [(ax[k], ay[k]), (bx[k], by[k]), (cx[k], cy[k])]
+    # the corners sorted top, middle, bottom by stage y, as the blocks bubble them (ties keep order)
+    Tx, Ty, Mx, My, Bx, By = ax.copy(), ay.copy(), bx.copy(), by.copy(), cx.copy(), cy.copy()
+    for hi, lo in (("T", "M"), ("M", "B"), ("T", "M")):
+        H_ = {"T": (Tx, Ty), "M": (Mx, My), "B": (Bx, By)}
+        (hx, hy), (lx, ly) = H_[hi], H_[lo]
+        sw = ly > hy
+        hx[sw], lx[sw] = lx[sw].copy(), hx[sw].copy()
+        hy[sw], ly[sw] = ly[sw].copy(), hy[sw].copy()
     with np.errstate(divide="ignore", invalid="ignore"):
-        for (px_, py_), (qx_, qy_) in ((P[0], P[1]), (P[1], P[2]), (P[2], P[0])):
-            cross = (py_ != qy_) & ~(((py_ - Y) * (qy_ - Y)) > 0)
-            xe = px_ + (((Y - py_) * (qx_ - px_)) / (qy_ - py_))
-            xl = np.where(cross & (xe < xl), xe, xl)
-            xr = np.where(cross & (xe > xr), xe, xr)
+        sL = (Bx - Tx) / (By - Ty)
+        dL = sL * (-s)
+        je = np.where(Ty > My, np.floor((C - My) / s), np.ceil((C - My) / s) - 1)
+        halves = [(np.ceil((C - Ty) / s), je, Tx, Ty, Mx, My), (je + 1, np.floor((C - By) / s), Mx, My, Bx, By)]
+    # (triangle, row) pairs of both halves: their triangle, row, Y and the edges' x at the row
+    parts = []
+    for first, end, px_, py_, qx_, qy_ in halves:
+        j0 = np.maximum(first, 0).astype(np.int64)
+        j1 = np.minimum(end, rows_n - 1).astype(np.int64)
+        nrows = np.maximum(j1 - j0 + 1, 0)
+        has = np.flatnonzero(nrows > 0)
+        if not len(has):
+            continue
+        with np.errstate(divide="ignore", invalid="ignore"):
+            Y0 = C - (s * j0[has].astype(np.float64))
+            xL0 = Tx[has] + ((Y0 - Ty[has]) * sL[has])
+            sS = (qx_[has] - px_[has]) / (qy_[has] - py_[has])
+            dS = sS * (-s)
+            xS0 = px_[has] + ((Y0 - py_[has]) * sS)
+        width = int(nrows[has].max())
+        within_h = np.arange(width)[None, :] < nrows[has][:, None]
+
+        def walk(x0, d):  # x at each row: the first row's, then + d per row, left to right
+            m = np.empty((len(has), width))
+            m[:, 0] = x0
+            m[:, 1:] = d[:, None]
+            return np.add.accumulate(m, axis=1)[within_h]
+
+        parts.append((np.repeat(has, nrows[has]),
+                      (j0[has][:, None] + np.arange(width)[None, :])[within_h],
+                      walk(xL0, dL[has]), walk(xS0, dS)))
+    if not parts:
+        return CellPicture(colour, owner, s)
+    k = np.concatenate([p[0] for p in parts])
+    pair_row = np.concatenate([p[1] for p in parts])
+    xLr = np.concatenate([p[2] for p in parts])
+    xSr = np.concatenate([p[3] for p in parts])
+    # back in draw order (a triangle's rows top to bottom), as the blocks visit them
+    srt = np.lexsort((pair_row, k))
+    k, pair_row, xLr, xSr = k[srt], pair_row[srt], xLr[srt], xSr[srt]
+    Y = C - (s * pair_row.astype(np.float64))
+    xl = np.where(xLr < xSr, xLr, xSr)
+    xr = np.where(xLr < xSr, xSr, xLr)
     i0 = np.maximum(np.ceil((xl - D) / s), 0).astype(np.int64)
     i1 = np.minimum(np.floor((xr - D) / s), cols_n - 1).astype(np.int64)
     n = np.maximum(i1 - i0 + 1, 0)

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from . import blocks as B
-from .blocks import add, and_, div, eq, gt, item, lt, mul, not_, sub, var
+from .blocks import add, div, eq, gt, item, lt, mul, not_, sub, var
 
 STAGE_W, STAGE_H = 480, 360
 
@@ -151,15 +151,14 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
     offs = r.lst("_toff", off_l)
     tws = r.lst("_tw", tw_l)
     ths = r.lst("_th", th_l)
-    tops = r.lst("_ttop", top_l)
     tex = r.lst("_tex")
     V = {n: r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy", "_toff", "_tw", "_th", "_m", "_ub",
                              "_qa", "_qb", "_qc", "_Ua", "_Ub", "_Uc", "_Va", "_Vb", "_Vc",
                              "_qx", "_qy", "_Ux", "_Uy", "_Vx", "_Vy", "_q", "_U", "_V", "_tq", "_tU", "_tV",
-                             "_j", "_j1", "_Y", "_xl", "_xr", "_xe", "_i0", "_i1", "_X", "_rs", "_rc", "_c",
-                             "_ymin", "_ymax", "_den")}
+                             "_j", "_j1", "_Y", "_xl", "_xr", "_i0", "_i1", "_X", "_rs", "_rc", "_c",
+                             "_den", "_qs", "_Us", "_Vs", "_o1", "_Tx", "_Ty", "_Mx", "_My", "_Bx", "_By", "_sx",
+                             "_sL", "_dL", "_sS", "_dS", "_je", "_xL", "_xS", "_ts")}
     ax, ay, bx, by, cx, cy = (V[n] for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
-    pts = {"a": (ax, ay), "b": (bx, by), "c": (cx, cy)}
     den = V["_den"]  # twice the signed area (b - a) x (c - a)
     setup: list[B.Node] = [
         r.set("_m", material),
@@ -175,53 +174,44 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
         tex_setup += [r.set(f"_q{name}", div(1, item(point, pz))),
                       r.set(f"_U{name}", mul(mul(u, V["_tw"]), V[f"_q{name}"])),
                       r.set(f"_V{name}", mul(mul(v, V["_th"]), V[f"_q{name}"]))]
-    tex_setup.append(B.if_(eq(item(V["_m"], tops), 1), [
-        # rows from the top: v runs down the list, (1 - v) * H
-        r.set(f"_V{n}", mul(mul(sub(1, item(add(V["_ub"], 2 * k + 2), spec.uvs)), V["_th"]), V[f"_q{n}"]))
-        for k, n in enumerate("abc")]))
+    if any(src.first_row == "top" for src in spec.sources):  # rows from the top: v runs down the list
+        tops = r.lst("_ttop", top_l)
+        tex_setup.append(B.if_(eq(item(V["_m"], tops), 1), [
+            r.set(f"_V{n}", mul(mul(sub(1, item(add(V["_ub"], 2 * k + 2), spec.uvs)), V["_th"]), V[f"_q{n}"]))
+            for k, n in enumerate("abc")]))
     for f in ("q", "U", "V"):
         fa, fb, fc = V[f"_{f}a"], V[f"_{f}b"], V[f"_{f}c"]
         tex_setup += [
             r.set(f"_{f}x", div(sub(mul(sub(fb, fa), sub(cy, ay)), mul(sub(fc, fa), sub(by, ay))), den)),
             r.set(f"_{f}y", div(sub(mul(sub(fc, fa), sub(bx, ax)), mul(sub(fb, fa), sub(cx, ax))), den)),
+            r.set(f"_{f}s", mul(V[f"_{f}x"], s)),  # the step from one cell to the next
         ]
-    # the cell rows: row j's centre is Y = C - s * j (j = 0 at the top: :func:`grid`)
-    rows = [
-        r.set("_ymin", ay), B.if_(lt(by, V["_ymin"]), [r.set("_ymin", by)]),
-        B.if_(lt(cy, V["_ymin"]), [r.set("_ymin", cy)]),
-        r.set("_ymax", ay), B.if_(gt(by, V["_ymax"]), [r.set("_ymax", by)]),
-        B.if_(gt(cy, V["_ymax"]), [r.set("_ymax", cy)]),
-        r.set("_j", B.mathop("ceiling", div(sub(C, V["_ymax"]), s))),
-        r.set("_j1", B.mathop("floor", div(sub(C, V["_ymin"]), s))),
-        B.if_(lt(V["_j"], 0), [r.set("_j", 0)]),
-        B.if_(gt(V["_j1"], STAGE_H // s - 1), [r.set("_j1", STAGE_H // s - 1)]),
+    tex_setup.append(r.set("_o1", add(V["_toff"], 1)))
+    # the cell rows: row j's centre is Y = C - s * j (j = 0 at the top: :func:`grid`). The corners
+    # sorted top (T), middle (M), bottom (B) by stage y; the long edge T-B bounds every row, the
+    # short edge T-M the rows with Y >= M.y (the upper half, when T is above M), M-B the rows below.
+    # Each edge's x is set at a half's first row and stepped by its slope times -s per row.
+    rows_max = STAGE_H // s - 1
+    sort: list[B.Node] = [r.set("_Tx", ax), r.set("_Ty", ay), r.set("_Mx", bx), r.set("_My", by),
+                          r.set("_Bx", cx), r.set("_By", cy)]
+    for hi, lo in (("T", "M"), ("M", "B"), ("T", "M")):  # bubble the highest y up (ties keep their order)
+        sort.append(B.if_(gt(V[f"_{lo}y"], V[f"_{hi}y"]), [
+            r.set("_sx", V[f"_{hi}x"]), r.set(f"_{hi}x", V[f"_{lo}x"]), r.set(f"_{lo}x", V["_sx"]),
+            r.set("_sx", V[f"_{hi}y"]), r.set(f"_{hi}y", V[f"_{lo}y"]), r.set(f"_{lo}y", V["_sx"])]))
+    Tx, Ty, Mx, My, Bx, By = (V[n] for n in ("_Tx", "_Ty", "_Mx", "_My", "_Bx", "_By"))
+    walk = [
+        r.set("_sL", div(sub(Bx, Tx), sub(By, Ty))), r.set("_dL", mul(V["_sL"], -s)),
+        # the last row of the upper half (Y >= M.y; none when T and M are level)
+        B.if_(gt(Ty, My), [r.set("_je", B.mathop("floor", div(sub(C, My), s)))],
+              [r.set("_je", sub(B.mathop("ceiling", div(sub(C, My), s)), 1))]),
     ]
-    # one row: the span where its centre line crosses the edges
-    Y = V["_Y"]
-    span: list[B.Node] = [r.set("_Y", sub(C, mul(s, V["_j"]))),
-                          r.set("_xl", 1e9), r.set("_xr", -1e9)]
-    for p, q in (("a", "b"), ("b", "c"), ("c", "a")):
-        (px_, py_), (qx_, qy_) = pts[p], pts[q]
-        cross = and_(not_(eq(py_, qy_)), not_(gt(mul(sub(py_, Y), sub(qy_, Y)), 0)))
-        span.append(B.if_(cross, [
-            r.set("_xe", add(px_, div(mul(sub(Y, py_), sub(qx_, px_)), sub(qy_, py_)))),
-            B.if_(lt(V["_xe"], V["_xl"]), [r.set("_xl", V["_xe"])]),
-            B.if_(gt(V["_xe"], V["_xr"]), [r.set("_xr", V["_xe"])]),
-        ]))
-    span += [
-        r.set("_i0", B.mathop("ceiling", div(sub(V["_xl"], D), s))),
-        r.set("_i1", B.mathop("floor", div(sub(V["_xr"], D), s))),
-        B.if_(lt(V["_i0"], 0), [r.set("_i0", 0)]),
-        B.if_(gt(V["_i1"], STAGE_W // s - 1), [r.set("_i1", STAGE_W // s - 1)]),
-        r.set("_X", add(mul(s, V["_i0"]), D)),
-    ]
-    X = V["_X"]
+    Y, X = V["_Y"], V["_X"]
     last = add(mul(s, V["_i1"]), D)
     flat_row = _run(r, s, flat, X, last, Y)
     # textured: q, U, V at the first cell, then the cells left to right, runs of one colour
     q, U, Vv = V["_q"], V["_U"], V["_V"]
     texel = item(add(add(mul(B.mod(B.floor(div(Vv, q)), V["_th"]), V["_tw"]), B.mod(B.floor(div(U, q)), V["_tw"])),
-                     add(V["_toff"], 1)), tex)
+                     V["_o1"]), tex)
     start = [r.set(f"_{f}", add(add(V[f"_{f}a"], mul(V[f"_{f}x"], sub(X, ax))), mul(V[f"_{f}y"], sub(Y, ay))))
              for f in ("q", "U", "V")]
     tex_row = start + [
@@ -231,14 +221,41 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
             B.if_(eq(V["_c"], V["_rc"]), [], [
                 B.if_(eq(V["_rc"], ""), [], _run(r, s, V["_rc"], V["_rs"], sub(X, s), Y)),
                 r.set("_rs", X), r.set("_rc", V["_c"])]),
-            r.change("_X", s), r.change("_q", mul(V["_qx"], s)), r.change("_U", mul(V["_Ux"], s)),
-            r.change("_V", mul(V["_Vx"], s)),
+            r.change("_X", s), r.change("_q", V["_qs"]), r.change("_U", V["_Us"]), r.change("_V", V["_Vs"]),
         ]),
         *_run(r, s, V["_rc"], V["_rs"], sub(X, s), Y),
     ]
-    row_loop = B.repeat(add(sub(V["_j1"], V["_j"]), 1), [
-        *span,
-        B.if_(not_(lt(V["_i1"], V["_i0"])), [B.if_(lt(V["_toff"], 0), flat_row, tex_row)]),
-        r.change("_j", 1),
-    ])
-    return setup + [B.if_(lt(V["_toff"], 0), [], tex_setup)] + rows + [row_loop]
+    xL, xS = V["_xL"], V["_xS"]
+    row = [
+        B.if_(lt(xL, xS), [r.set("_xl", xL), r.set("_xr", xS)], [r.set("_xl", xS), r.set("_xr", xL)]),
+        r.set("_i0", B.mathop("ceiling", div(sub(V["_xl"], D), s))),
+        r.set("_i1", B.mathop("floor", div(sub(V["_xr"], D), s))),
+        B.if_(lt(V["_i0"], 0), [r.set("_i0", 0)]),
+        B.if_(gt(V["_i1"], STAGE_W // s - 1), [r.set("_i1", STAGE_W // s - 1)]),
+        r.set("_X", add(mul(s, V["_i0"]), D)),
+        B.if_(not_(lt(V["_i1"], V["_i0"])), [B.if_(lt(V["_toff"], 0), flat_row, [
+            # the texture's set-up at the triangle's first row with cells (most small triangles have none)
+            B.if_(eq(V["_ts"], 0), [*tex_setup, r.set("_ts", 1)]), *tex_row])]),
+        r.change("_Y", -s), r.change("_xL", V["_dL"]), r.change("_xS", V["_dS"]),
+    ]
+
+    def half(first: Any, end: Any, px_: Any, py_: Any, qx_: Any, qy_: Any) -> list[B.Node]:
+        """The rows first .. end (clamped to the stage), bounded by the long edge and the short
+        edge p-q."""
+        return [
+            r.set("_j", first), B.if_(lt(V["_j"], 0), [r.set("_j", 0)]),
+            r.set("_j1", end), B.if_(gt(V["_j1"], rows_max), [r.set("_j1", rows_max)]),
+            B.if_(not_(lt(V["_j1"], V["_j"])), [
+                r.set("_Y", sub(C, mul(s, V["_j"]))),
+                r.set("_xL", add(Tx, mul(sub(Y, Ty), V["_sL"]))),
+                r.set("_sS", div(sub(qx_, px_), sub(qy_, py_))), r.set("_dS", mul(V["_sS"], -s)),
+                r.set("_xS", add(px_, mul(sub(Y, py_), V["_sS"]))),
+                B.repeat(add(sub(V["_j1"], V["_j"]), 1), row),
+            ]),
+        ]
+
+    upper = half(B.mathop("ceiling", div(sub(C, Ty), s)), V["_je"], Tx, Ty, Mx, My)
+    lower = half(add(V["_je"], 1), B.mathop("floor", div(sub(C, By), s)), Mx, My, Bx, By)
+    # nothing to do for a triangle between two cell rows
+    rows_any = not_(gt(B.mathop("ceiling", div(sub(C, Ty), s)), B.mathop("floor", div(sub(C, By), s))))
+    return sort + [B.if_(rows_any, [*setup, *walk, r.set("_ts", 0), *upper, *lower])]

@@ -129,6 +129,7 @@ def picture(verts: np.ndarray, tris: np.ndarray, order: np.ndarray, cam: readers
     with np.errstate(divide="ignore", invalid="ignore"):
         sL = (Bx - Tx) / (By - Ty)
         dL = sL * (-s)
+        ll = (Tx + ((My - Ty) * sL)) < Mx  # the long edge on the left of both halves
         je = np.where(Ty > My, np.floor((C - My) / s), np.ceil((C - My) / s) - 1)
         halves = [(np.ceil((C - Ty) / s), je, Tx, Ty, Mx, My), (je + 1, np.floor((C - By) / s), Mx, My, Bx, By)]
     # (triangle, row) pairs of both halves: their triangle, row, Y and the edges' x at the row
@@ -146,30 +147,28 @@ def picture(verts: np.ndarray, tris: np.ndarray, order: np.ndarray, cam: readers
             sS = (qx_[has] - px_[has]) / (qy_[has] - py_[has])
             dS = sS * (-s)
             xS0 = px_[has] + ((Y0 - py_[has]) * sS)
+            h_ll = ll[has]
         width = int(nrows[has].max())
         within_h = np.arange(width)[None, :] < nrows[has][:, None]
 
-        def walk(x0, d):  # x at each row: the first row's, then + d per row, left to right
+        def walk(x0, d):  # the value at each row: the first row's, then + d per row, left to right
             m = np.empty((len(has), width))
             m[:, 0] = x0
             m[:, 1:] = d[:, None]
             return np.add.accumulate(m, axis=1)[within_h]
 
-        parts.append((np.repeat(has, nrows[has]),
-                      (j0[has][:, None] + np.arange(width)[None, :])[within_h],
-                      walk(xL0, dL[has]), walk(xS0, dS)))
+        parts.append({"k": np.repeat(has, nrows[has]),
+                      "row": (j0[has][:, None] + np.arange(width)[None, :])[within_h],
+                      "xl": walk(np.where(h_ll, xL0, xS0), np.where(h_ll, dL[has], dS)),
+                      "xr": walk(np.where(h_ll, xS0, xL0), np.where(h_ll, dS, dL[has]))})
     if not parts:
         return CellPicture(colour, owner, s)
-    k = np.concatenate([p[0] for p in parts])
-    pair_row = np.concatenate([p[1] for p in parts])
-    xLr = np.concatenate([p[2] for p in parts])
-    xSr = np.concatenate([p[3] for p in parts])
+    cat = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
     # back in draw order (a triangle's rows top to bottom), as the blocks visit them
-    srt = np.lexsort((pair_row, k))
-    k, pair_row, xLr, xSr = k[srt], pair_row[srt], xLr[srt], xSr[srt]
+    srt = np.lexsort((cat["row"], cat["k"]))
+    cat = {key: v[srt] for key, v in cat.items()}
+    k, pair_row, xl, xr = cat["k"], cat["row"], cat["xl"], cat["xr"]
     Y = C - (s * pair_row.astype(np.float64))
-    xl = np.where(xLr < xSr, xLr, xSr)
-    xr = np.where(xLr < xSr, xSr, xLr)
     i0 = np.maximum(np.ceil((xl - D) / s), 0).astype(np.int64)
     i1 = np.minimum(np.floor((xr - D) / s), cols_n - 1).astype(np.int64)
     n = np.maximum(i1 - i0 + 1, 0)

@@ -157,7 +157,7 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
                              "_qx", "_qy", "_Ux", "_Uy", "_Vx", "_Vy", "_q", "_U", "_V", "_tq", "_tU", "_tV",
                              "_j", "_j1", "_Y", "_xl", "_xr", "_i0", "_i1", "_X", "_rs", "_rc", "_c",
                              "_den", "_qs", "_Us", "_Vs", "_o1", "_Tx", "_Ty", "_Mx", "_My", "_Bx", "_By", "_sx",
-                             "_sL", "_dL", "_sS", "_dS", "_je", "_xL", "_xS", "_ts")}
+                             "_sL", "_dL", "_sS", "_dS", "_je", "_xL", "_xS", "_ll", "_dl", "_dr", "_ts")}
     ax, ay, bx, by, cx, cy = (V[n] for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
     den = V["_den"]  # twice the signed area (b - a) x (c - a)
     setup: list[B.Node] = [
@@ -204,17 +204,18 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
         # the last row of the upper half (Y >= M.y; none when T and M are level)
         B.if_(gt(Ty, My), [r.set("_je", B.mathop("floor", div(sub(C, My), s)))],
               [r.set("_je", sub(B.mathop("ceiling", div(sub(C, My), s)), 1))]),
+        # the long edge is on the left of both halves when it passes left of the middle corner
+        B.if_(lt(add(Tx, mul(sub(My, Ty), V["_sL"])), Mx), [r.set("_ll", 1)], [r.set("_ll", 0)]),
     ]
     Y, X = V["_Y"], V["_X"]
     last = add(mul(s, V["_i1"]), D)
-    flat_row = _run(r, s, flat, X, last, Y)
-    # textured: q, U, V at the first cell, then the cells left to right, runs of one colour
+    # textured: q, U, V at the first cell (from their values at x = 0 on this row), then the
+    # cells left to right, runs of one colour
     q, U, Vv = V["_q"], V["_U"], V["_V"]
     texel = item(add(add(mul(B.mod(B.floor(div(Vv, q)), V["_th"]), V["_tw"]), B.mod(B.floor(div(U, q)), V["_tw"])),
                      V["_o1"]), tex)
-    start = [r.set(f"_{f}", add(add(V[f"_{f}a"], mul(V[f"_{f}x"], sub(X, ax))), mul(V[f"_{f}y"], sub(Y, ay))))
-             for f in ("q", "U", "V")]
-    tex_row = start + [
+    tex_cells = [r.set(f"_{f}", add(add(V[f"_{f}a"], mul(V[f"_{f}x"], sub(X, ax))), mul(V[f"_{f}y"], sub(Y, ay))))
+                 for f in ("q", "U", "V")] + [
         r.set("_rs", X), r.set("_rc", ""),
         B.repeat(add(sub(V["_i1"], V["_i0"]), 1), [
             r.set("_c", texel),
@@ -225,23 +226,27 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
         ]),
         *_run(r, s, V["_rc"], V["_rs"], sub(X, s), Y),
     ]
-    xL, xS = V["_xL"], V["_xS"]
-    row = [
-        B.if_(lt(xL, xS), [r.set("_xl", xL), r.set("_xr", xS)], [r.set("_xl", xS), r.set("_xr", xL)]),
-        r.set("_i0", B.mathop("ceiling", div(sub(V["_xl"], D), s))),
-        r.set("_i1", B.mathop("floor", div(sub(V["_xr"], D), s))),
-        B.if_(lt(V["_i0"], 0), [r.set("_i0", 0)]),
-        B.if_(gt(V["_i1"], STAGE_W // s - 1), [r.set("_i1", STAGE_W // s - 1)]),
-        r.set("_X", add(mul(s, V["_i0"]), D)),
-        B.if_(not_(lt(V["_i1"], V["_i0"])), [B.if_(lt(V["_toff"], 0), flat_row, [
-            # the texture's set-up at the triangle's first row with cells (most small triangles have none)
-            B.if_(eq(V["_ts"], 0), [*tex_setup, r.set("_ts", 1)]), *tex_row])]),
-        r.change("_Y", -s), r.change("_xL", V["_dL"]), r.change("_xS", V["_dS"]),
-    ]
+
+    def row(textured: bool) -> list[B.Node]:
+        """One cell row: its cells between the left and right edges, then every walker one row down."""
+        body = [
+            r.set("_i0", B.mathop("ceiling", div(sub(V["_xl"], D), s))),
+            r.set("_i1", B.mathop("floor", div(sub(V["_xr"], D), s))),
+            B.if_(lt(V["_i0"], 0), [r.set("_i0", 0)]),
+            B.if_(gt(V["_i1"], STAGE_W // s - 1), [r.set("_i1", STAGE_W // s - 1)]),
+            r.set("_X", add(mul(s, V["_i0"]), D)),
+            B.if_(not_(lt(V["_i1"], V["_i0"])), [
+                # (textured) the texture's set-up at the triangle's first row with cells: most
+                # small triangles have none
+                B.if_(eq(V["_ts"], 0), [*tex_setup, r.set("_ts", 1)]), *tex_cells] if textured else
+                _run(r, s, flat, X, last, Y)),
+            r.change("_Y", -s), r.change("_xl", V["_dl"]), r.change("_xr", V["_dr"]),
+        ]
+        return body
 
     def half(first: Any, end: Any, px_: Any, py_: Any, qx_: Any, qy_: Any) -> list[B.Node]:
-        """The rows first .. end (clamped to the stage), bounded by the long edge and the short
-        edge p-q."""
+        """The rows first .. end (clamped to the stage), between the long edge and the short edge
+        p-q; each edge's x set at the first row and stepped by its slope times -s."""
         return [
             r.set("_j", first), B.if_(lt(V["_j"], 0), [r.set("_j", 0)]),
             r.set("_j1", end), B.if_(gt(V["_j1"], rows_max), [r.set("_j1", rows_max)]),
@@ -250,7 +255,11 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
                 r.set("_xL", add(Tx, mul(sub(Y, Ty), V["_sL"]))),
                 r.set("_sS", div(sub(qx_, px_), sub(qy_, py_))), r.set("_dS", mul(V["_sS"], -s)),
                 r.set("_xS", add(px_, mul(sub(Y, py_), V["_sS"]))),
-                B.repeat(add(sub(V["_j1"], V["_j"]), 1), row),
+                B.if_(eq(V["_ll"], 1),
+                      [r.set("_xl", V["_xL"]), r.set("_dl", V["_dL"]), r.set("_xr", V["_xS"]), r.set("_dr", V["_dS"])],
+                      [r.set("_xl", V["_xS"]), r.set("_dl", V["_dS"]), r.set("_xr", V["_xL"]), r.set("_dr", V["_dL"])]),
+                B.if_(lt(V["_toff"], 0), [B.repeat(add(sub(V["_j1"], V["_j"]), 1), row(False))],
+                      [B.repeat(add(sub(V["_j1"], V["_j"]), 1), row(True))]),
             ]),
         ]
 
@@ -258,4 +267,4 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
     lower = half(add(V["_je"], 1), B.mathop("floor", div(sub(C, By), s)), Mx, My, Bx, By)
     # nothing to do for a triangle between two cell rows
     rows_any = not_(gt(B.mathop("ceiling", div(sub(C, Ty), s)), B.mathop("floor", div(sub(C, By), s))))
-    return sort + [B.if_(rows_any, [*setup, *walk, r.set("_ts", 0), *upper, *lower])]
+    return sort + [B.if_(rows_any, [*setup, r.set("_ts", 0), *walk, *upper, *lower])]

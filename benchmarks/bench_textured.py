@@ -169,6 +169,16 @@ def main() -> None:
             for mode in ("compiled", "interpreted"):
                 if mode in st and mode in flat and flat[mode]["frame_seconds"] > 0:
                     st[mode]["vs_flat"] = st[mode]["frame_seconds"] / flat[mode]["frame_seconds"]
+    # one row per model and setting, for README's table
+    results["rows"] = [{"model": name, "setting": "flat" if key == "0" else f"texel size {key}",
+                        "triangles": row["triangles"], "compiled_ms": 1000 * st["compiled"]["frame_seconds"]
+                        if "compiled" in st else None,
+                        "interpreted_ms": 1000 * st["interpreted"]["frame_seconds"] if "interpreted" in st else None,
+                        "compiled_vs_flat": st.get("compiled", {}).get("vs_flat"),
+                        "interpreted_vs_flat": st.get("interpreted", {}).get("vs_flat"),
+                        **{k: st[k] for k in ("cells", "blocks_per_frame", "blocks_vs_flat", "blocks_per_cell",
+                                              "blocks_load")}}
+                       for name, row in results["models"].items() for key, st in row["settings"].items()]
     results["seconds"] = time.perf_counter() - t0
     results["machine"]["loadavg_after"] = os.getloadavg()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

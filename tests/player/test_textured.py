@@ -35,6 +35,9 @@ BAKES = {  # name -> (corpus model, --set overrides)
     "box": ("box_textured_glb/BoxTextured.glb", []),
     "duck": ("duck_glb/Duck.glb", []),
     "box textimage": ("box_textured_glb/BoxTextured.glb", ['textures.encodings=["textimage"]']),
+    # an engine's layout (issue 39): a soup with one list per coordinate, 0-based materials
+    "box soup": ("box_textured_glb/BoxTextured.glb", ['export.faces="soup"', 'export.names.vertices=["X", "Y", "Z"]',
+                                                      "export.index_base=0"]),
     "room lightmap": ("cornell_box_multimaterial", ["lighting.enabled=true", 'lighting.target="lightmap"',
                                                      "textures.enabled=true", "textures.lightmap.enabled=true",
                                                      "textures.lightmap.resolution=64", "lighting.ao.enabled=true",

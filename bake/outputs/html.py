@@ -215,7 +215,8 @@ def _views_section(views: list, mesh, bview=None) -> str:
              f"({_backdrop_words(mesh.backdrop)}).</p>"]
     if bview is not None:
         j = bview.to_json()
-        parts.append(f"<p class=sub>The green flag draws the <b>BVH view</b> (<code>export.green_flag = \"bvh\"</code>): "
+        parts.append(f"<p class=sub>The green flag draws the <b>BVH view</b> "
+                     f"(<code>export.green_flag = \"bvh\"</code>): "
                      f"one ray per cell of {j['cell']} × {j['cell']} stage pixels ({j['rays']:,} rays, "
                      f"{j['hit_cells']:,} hit), traced here in Python through the BVH lists as written, as the "
                      f"reader's <code>bvh view</code> traces them, each hit cell a pen dot of size "

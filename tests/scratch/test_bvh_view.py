@@ -140,7 +140,8 @@ def test_the_sprite3_carries_the_view_and_the_default_does_not(baked, tmp_path):
              if isinstance(b, dict) and b.get("opcode") == "procedures_prototype"}
     assert {"bvh view", "camera ray %s %s", "bvh ray %s %s %s %s %s %s", "render"} <= codes
     # no green-flag script in the .sprite3
-    assert not any(isinstance(b, dict) and b.get("opcode") == "event_whenflagclicked" for b in target["blocks"].values())
+    assert not any(isinstance(b, dict) and b.get("opcode") == "event_whenflagclicked"
+                   for b in target["blocks"].values())
 
 
 # --------------------------------------------------------------------------- Python only
@@ -220,7 +221,8 @@ def test_a_ray_through_a_projected_vertex_reaches_the_vertex(baked):
         eye = np.array([cam.x, cam.y, cam.z])
         rel = pts[ok] - eye
         off = np.linalg.norm(np.cross(rel, d), axis=1) / np.linalg.norm(d, axis=1)
-        assert np.all(off <= 1e-9 * np.linalg.norm(rel, axis=1)), (case["name"], (off / np.linalg.norm(rel, axis=1)).max())
+        dist = np.linalg.norm(rel, axis=1)
+        assert np.all(off <= 1e-9 * dist), (case["name"], (off / dist).max())
         # so it meets the mesh at the corner or before it: all but a few silhouette corners (Suzanne:
         # 2 of 505), which that 1e-9 can put just outside every triangle at the corner (it is more
         # than the 1e-9 barycentric tolerance of a triangle 1/100 of the distance across)

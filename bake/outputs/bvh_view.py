@@ -189,11 +189,13 @@ def bvh_view(lists: Mapping[str, list], cam: Camera, cell: int, layout: str, bit
 
 def view_from_report(lists: Mapping[str, list], report: Mapping[str, Any]) -> BVHView | None:
     """The green flag's BVH view of a bake (report.json and its lists), or None when the bake
-    does not draw one (``export.green_flag`` is not ``"bvh"``, or it wrote no BVH or mesh)."""
+    does not draw one (``export.green_flag`` is not ``"bvh"``, no .sb3 or reader sprite was
+    written, or it wrote no BVH or mesh)."""
     from ..scratch.project import auto_camera
 
     export = (report.get("config") or {}).get("export") or {}
-    if export.get("green_flag", "raster") != "bvh" or export.get("reader", True) is False:
+    if export.get("green_flag", "raster") != "bvh" or export.get("reader", True) is False \
+            or export.get("sb3", True) is False:
         return None
     bvh = next((s.get("details") or {} for s in report.get("stages", []) if s.get("name") == "bvh"), None)
     if not bvh or not bvh.get("layout"):

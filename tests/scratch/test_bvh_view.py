@@ -268,7 +268,7 @@ def test_each_cell_shows_the_triangle_a_depth_buffer_shows():
             shown = im.tri_id[r[on], c[on]] + 1
             agree = (shown == view.tri[on]).mean()
             # (a cell centre on an edge between two triangles may go either way)
-            assert agree >= 0.98 and view.hit.mean() > 0.05, (model, cell, agree)
+            assert agree >= 0.99 and view.hit.mean() > 0.05, (model, cell, agree)  # (measured: 1.0)
 
 
 def test_report_html_shows_the_view_beside_the_green_flag(tmp_path):

@@ -502,6 +502,16 @@ class ExportConfig:
     # "fencing on" table in README). TurboWarp applies it to the whole project; Scratch ignores it. Never written
     # into export.into projects or the .sprite3.
     turbowarp_fencing: bool = False
+    # What the .sb3's green flag draws: "raster" = the pen renderer (`render`: every triangle
+    # filled, in BSP order); "bvh" = the reader's BVH ray-traced view (`bvh view`: one ray per
+    # cell of `bvh_cell` x `bvh_cell` stage pixels through `bvh ray`, each cell stamped with the
+    # colour of the triangle it hits; needs bvh.enabled, else the bake warns and draws the raster).
+    # report.html shows the same picture computed in Python (bake/outputs/bvh_view.py).
+    green_flag: Literal["raster", "bvh"] = "raster"
+    # The BVH view's cell size in stage pixels (3..60; the sprite's variable `bvh cell`): 8 casts
+    # 60 x 45 rays. Below 3 the pen's round dots cannot cover a cell without reaching the centre
+    # of the next one (docs/formats-bvh.md, "The BVH view").
+    bvh_cell: int = 8
     # Bake into an existing project: a new .sb3 with our lists put into `into_target` (replacing
     # same-named lists, monitors hidden), everything else untouched. The input is never written.
     into: str = ""  # path of the .sb3 (relative to the config file)
@@ -519,6 +529,7 @@ class ExportConfig:
         for key, why in split_problems(self.names, self.faces):
             need(False, f"names.{key}", why)
         need(self.pack_max_items >= 0, "pack_max_items", "must be >= 0 (0 = no limit)")
+        need(3 <= self.bvh_cell <= 60, "bvh_cell", f"must be between 3 and 60 stage pixels (got {self.bvh_cell})")
         for key, name, blank in (("json_name", self.json_name, False), ("sb3_name", self.sb3_name, True),
                                  ("into_name", self.into_name, True)):
             need(bool(name) or blank, key, "must be a file name (it is empty)")

@@ -203,7 +203,7 @@ def _backdrop_words(rgb) -> str:
     return "white" if h == "#ffffff" else f"{h}: the model's colours are too light to show on white"
 
 
-def _views_section(views: list, mesh) -> str:
+def _views_section(views: list, mesh, bview=None) -> str:
     parts = [f"<h2>Previews</h2><p class=sub>Rendered from the written lists (rounded positions, encoded "
              f"colours: {_esc(mesh.colour_source)}) by scratch-bake's numpy rasterizer. Left: the painter's "
              f"order a Scratch engine would draw ({_esc(views[0].stats['order']) if views else ''}); middle: "
@@ -213,20 +213,34 @@ def _views_section(views: list, mesh) -> str:
              f"faces are coplanar to the bake (either order is right). The green flag's view is the "
              f"project's stage: colours flat, as the reader sprite fills them, on its backdrop "
              f"({_backdrop_words(mesh.backdrop)}).</p>"]
+    if bview is not None:
+        j = bview.to_json()
+        parts.append(f"<p class=sub>The green flag draws the <b>BVH view</b> "
+                     f"(<code>export.green_flag = \"bvh\"</code>): "
+                     f"one ray per cell of {j['cell']} × {j['cell']} stage pixels ({j['rays']:,} rays, "
+                     f"{j['hit_cells']:,} hit), traced here in Python through the BVH lists as written, as the "
+                     f"reader's <code>bvh view</code> traces them, each hit cell a pen dot of size "
+                     f"{j['pen_size']:.2f} in the colour of the triangle hit ({_esc(j['colours'])}); the rays "
+                     f"see either side of a triangle, so a closed model seen from outside shows its outside. "
+                     f"Beside the green flag's raster below.</p>")
     for v in views:
         s = v.stats
         cls = "good" if s["wrong_pixels"] == 0 else "bad"
+        extra = ""
+        if bview is not None and v.name == "green flag":
+            extra = (f"<figure><img alt='BVH view' src='{png_data_uri(bview.stage(mesh.backdrop))}'>"
+                     f"<figcaption>BVH view (the green flag's)</figcaption></figure>")
         parts.append(
             f"<h3 style='font-size:14px;margin:14px 0 4px'>{_esc(v.name)}: <span class={cls}>"
             f"{s['wrong_pixels']:,} wrong pixels ({s['wrong_fraction']:.3%} of {s['covered_pixels']:,})"
             f"</span>, {s['edge_pixels']:,} on edges, {s['tie_pixels']:,} coplanar ties, {s['drawn']:,} triangles "
-            f"drawn</h3><div class=views>"
+            f"drawn</h3><div class=views{' style=grid-template-columns:repeat(4,1fr)' if extra else ''}>"
             f"<figure><img alt='painter {_esc(v.name)}' src='{png_data_uri(v.painter)}'>"
             f"<figcaption>painter's order</figcaption></figure>"
             f"<figure><img alt='z-buffer {_esc(v.name)}' src='{png_data_uri(v.zbuffer)}'>"
             f"<figcaption>depth buffer</figcaption></figure>"
             f"<figure><img alt='difference {_esc(v.name)}' src='{png_data_uri(v.diff)}'>"
-            f"<figcaption>difference</figcaption></figure></div>")
+            f"<figcaption>difference</figcaption></figure>{extra}</div>")
     return "".join(parts)
 
 
@@ -490,6 +504,11 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
     mesh = preview.mesh_from_lists(lists, report, lightmap=lm_img)
     tie = _tie(report, mesh)
     views = preview.render_views(mesh, width, height, tie, memo=memo) if mesh is not None and len(mesh.tris) else []
+    bview = None
+    if views:  # the green flag's BVH view (export.green_flag = "bvh"), as the reader traces it
+        from .bvh_view import view_from_report
+
+        bview = view_from_report(lists, report)
     sweeps = load_sweeps(out_dir)
     s = report.get("scene", {})
     title = Path(report.get("input", {}).get("path") or "bake").name
@@ -504,7 +523,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
                                                                                "</b>") + "</p>")
     body = [head, _limits_section(report)]
     if views:
-        body.append(_views_section(views, mesh))
+        body.append(_views_section(views, mesh, bview))
         body.append(_textured_section(lists, report, mesh))
     else:
         why = ("the export stage was off (export.enabled = false)" if not ex.get("enabled", True) else
@@ -519,6 +538,7 @@ def build(out_dir: Path, *, width: int = 320, height: int = 240,
             f"<body>{''.join(body)}<p class=sub style='margin-top:32px'>report.json has every figure on this page; "
             "re-render with <code>bake report FOLDER</code>.</p></body></html>\n")
     info = {"views": [{"name": v.name, **v.stats} for v in views],
+            "bvh_view": bview.to_json() if bview is not None else None,
             "textures": [{"name": t["name"], "encodings": list(t["images"]), "agree": t["agree"]} for t in textures],
             "sweeps": [sw["file"] for sw in sweeps], "images": page.count("<img ")}
     return page, info

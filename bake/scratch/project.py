@@ -111,10 +111,13 @@ def reader_spec(scene: Any, cfg: Any, values: dict[str, list]) -> readers.Reader
                                  index_base=_cfg(cfg, "index_base", 1), soup=_cfg(cfg, "faces", "") == "soup")
     cam = auto_camera(book["vertices"]) if mesh else readers.Camera()
     two = [1 if getattr(m, "double_sided", False) else 0 for m in getattr(scene, "materials", ())]
-    return readers.ReaderSpec(mesh=mesh, bvh=_bvh_spec(scene, values), bsp=_bsp_spec(scene, values),
+    bvh = _bvh_spec(scene, values)
+    # the green flag's BVH view (export.green_flag = "bvh"): only with a BVH and a mesh to colour it
+    view = int(_cfg(cfg, "bvh_cell", 8)) if _cfg(cfg, "green_flag", "raster") == "bvh" and bvh and mesh else None
+    return readers.ReaderSpec(mesh=mesh, bvh=bvh, bsp=_bsp_spec(scene, values),
                               textimage=has_textimage(values), renderer=True, camera=cam, two_sided=two,
                               bounds=readers.bounding_sphere(book["vertices"]) if mesh else None,
-                              texture=texture_spec(scene, cfg, values) if mesh else None)
+                              texture=texture_spec(scene, cfg, values) if mesh else None, bvh_view=view)
 
 
 def texture_spec(scene: Any, cfg: Any, values: dict[str, list]) -> TextureSpec | None:
@@ -257,6 +260,11 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
     packed_name = cfg.names.packed
     want_reader = bool(_cfg(cfg, "reader", True))
     plain_spec = reader_spec(scene, cfg, values) if want_reader else None
+    if plain_spec is not None and _cfg(cfg, "green_flag", "raster") == "bvh" and plain_spec.bvh_view is None \
+            and record is not None:
+        record.warn("export.green_flag = \"bvh\" needs a BVH (bvh.enabled = true) and the mesh lists: "
+                    + ("the bake wrote no BVH" if plain_spec.bvh is None else "the bake wrote no mesh lists")
+                    + ", so the green flag draws " + ("the raster (render)" if plain_spec.mesh else "nothing"))
     spec = _with_loader(plain_spec, packed, packed_name)
     stored = packed_values(values, packed, packed_name)
     details = record.details if record is not None else {}

@@ -248,3 +248,98 @@ def _bvh_wide_walk(r, s, p: B.VarRef) -> list[B.Node]:
         ]),
         B.repeat_until(eq(p, 0), per_node),
     ]
+
+
+# --------------------------------------------------------------------------- the BVH view
+#: sqrt(2), typed into the pen-size block (the double JavaScript reads back is exactly this one)
+SQRT2 = 1.4142135623730951
+
+
+def view_pen_size(cell: float) -> float:
+    """The pen size of the BVH view's dots for cells of ``cell`` stage pixels, computed as the
+    block does: ``((cell - 1) * sqrt 2) + 1``. A dot is a disc of that diameter around the cell's
+    centre; the pen paints it fully to ``(size - 1) / 2`` from the centre (its antialiased edge
+    is one pixel wide), which reaches the centre of the cell's farthest pixel; its edge ends
+    ``(size + 1) / 2`` from the centre, short of every pixel of a neighbouring cell that the
+    picture is read at (docs/formats-bvh.md, "The BVH view")."""
+    return ((cell - 1) * SQRT2) + 1
+
+
+def view_grid(cell: float) -> tuple[int, int]:
+    """(rows, columns) of the BVH view: ``ceiling(360 / cell)`` by ``ceiling(480 / cell)`` (the
+    last row and column may reach past the stage's edge)."""
+    import math
+
+    return math.ceil(360 / cell), math.ceil(480 / cell)
+
+
+def _material_of(r, t) -> B.Reporter:
+    """The reporter of triangle t's material item number (1-based) in the mesh lists as written."""
+    from . import readers as R
+
+    m = r.spec.mesh
+    walk = R._triangle_walk(m)
+    if walk == "book":
+        return R._index(m, item(mul(t, 4), m.tris))
+    if walk == "split":
+        return R._index(m, item(t, m.tris[3]))
+    return R._index(m, item(t, m.tris))
+
+
+def bvh_view_part(r) -> None:
+    """``camera ray (sx) (sy)``: the direction of the camera's ray through stage point (sx, sy)
+    into ``ray dx``, ``ray dy``, ``ray dz`` (its origin is ``cam x, cam y, cam z``); ``bvh view``:
+    one such ray through the centre of every cell of ``bvh cell`` x ``bvh cell`` stage pixels
+    (rows from the top, left to right), traced with ``bvh ray``, and a pen dot of
+    :func:`view_pen_size` at the centre of every cell whose ray hits, in the hit triangle's colour
+    (``tri colors``, else its material's ``mat colors``); cells that miss are not painted.
+
+    The ray inverts the reader's projection (readers.py, "The camera model"): with ``s, c`` Scratch's
+    sine and cosine of ``cam yaw`` and ``sp, cp`` of ``cam pitch``, the camera's right is
+    ``(c, 0, -s)``, its up ``(-s*sp, cp, -c*sp)`` and its forward ``(s*cp, sp, c*cp)``, and the ray
+    is ``right*sx + up*sy + forward*focal``, computed as
+    ``dx = ((c*sx) - ((s*sp)*sy)) + ((s*cp)*focal)``, ``dy = (cp*sy) + (sp*focal)``,
+    ``dz = ((0 - (s*sx)) - ((c*sp)*sy)) + ((c*cp)*focal)``: the point at depth ``z''`` along it
+    projects back onto (sx, sy) (up to the 1e-10 by which the rounded sine and cosine miss
+    ``s^2 + c^2 = 1``). The Python reference, with the same arithmetic in the same order, is
+    ``bake.outputs.bvh_view``."""
+    from . import readers as R
+
+    m = r.spec.mesh
+    cell = r.v("bvh cell", r.spec.bvh_view)
+    for n in ("ray dx", "ray dy", "ray dz"):
+        r.v(n)
+    s, c, sp, cp = (r.v(n) for n in ("_gs", "_gc", "_gsp", "_gcp"))
+    focal = var("focal")
+    sx, sy = B.arg("sx"), B.arg("sy")
+    r.define("camera ray %s %s", ["sx", "sy"], [
+        r.set("_gs", B.mathop("sin", var("cam yaw"))), r.set("_gc", B.mathop("cos", var("cam yaw"))),
+        r.set("_gsp", B.mathop("sin", var("cam pitch"))), r.set("_gcp", B.mathop("cos", var("cam pitch"))),
+        r.set("ray dx", add(sub(mul(c, sx), mul(mul(s, sp), sy)), mul(mul(s, cp), focal))),
+        r.set("ray dy", add(mul(cp, sy), mul(sp, focal))),
+        r.set("ray dz", add(sub(sub(0, mul(s, sx)), mul(mul(c, sp), sy)), mul(mul(c, cp), focal))),
+    ])
+    gx, gy = r.v("_gx"), r.v("_gy")
+    colour, last = r.v("_c"), r.v("_pc")
+    hit = var("hit tri")
+    paint = [
+        r.set("_c", R._colour(r, hit, _material_of(r, hit))),
+        B.if_(eq(colour, last), [], [B.set_pen_color(colour), r.set("_pc", colour)]),
+        B.goto_xy(gx, gy), B.pen_down(), B.pen_up(),
+    ]
+    r.define("bvh view", [], [
+        B.hide(), B.pen_up(), B.pen_clear(), B.switch_costume("fence"),
+        B.set_pen_size(add(mul(sub(cell, 1), SQRT2), 1)), r.set("_pc", ""),
+        r.set("_gy", sub(180, div(cell, 2))),
+        B.repeat(B.mathop("ceiling", div(360, cell)), [
+            r.set("_gx", sub(div(cell, 2), 240)),
+            B.repeat(B.mathop("ceiling", div(480, cell)), [
+                B.call("camera ray %s %s", gx, gy),
+                B.call("bvh ray %s %s %s %s %s %s", var("cam x"), var("cam y"), var("cam z"),
+                       var("ray dx"), var("ray dy"), var("ray dz")),
+                B.if_(gt(hit, 0), paint),
+                r.change("_gx", cell),
+            ]),
+            r.change("_gy", sub(0, cell)),
+        ]),
+    ])

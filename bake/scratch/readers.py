@@ -38,6 +38,13 @@ custom block                                what it does                        
                                             triangle; 0 on a miss), ``hit t``    trace_one``
                                             (-1 on a miss), ``hit u``, ``hit
                                             v``, ``hit slot``
+``camera ray (sx) (sy)``                    (``export.green_flag = "bvh"``) the  ``bake.outputs.
+                                            camera's ray through stage point     bvh_view.view_rays``
+                                            (sx, sy): ``ray dx``, ``ray dy``,
+                                            ``ray dz`` (origin ``cam x/y/z``)
+``bvh view``                                (the same) one ``bvh ray`` per cell  ``bake.outputs.
+                                            of ``bvh cell`` stage pixels, a pen  bvh_view.bvh_view``
+                                            dot of the hit triangle's colour
 ``decode textimage (text)``                 TextImage v0 -> ``ti colors``,       ``bake.textures.
                                             ``ti width``, ``ti height``          textimage.decode``
 ==========================================  ===================================  ======================
@@ -88,7 +95,7 @@ import numpy as np
 from . import sb3
 from . import blocks as B
 from .blocks import add, div, eq, gt, item, lt, mul, not_, and_, sub, var
-from .reader_bvh import BIG, bvh_part
+from .reader_bvh import BIG, bvh_part, bvh_view_part
 from .reader_texture import TextureSpec, cell_fill, load_blocks
 from .reader_textimage import alphabet_costumes, textimage_part
 
@@ -167,6 +174,8 @@ class ReaderSpec:
     ``two_sided``: per material (1-based order), 1 when drawn from both sides (the sprite keeps it
     as the list ``mat two-sided`` only when some material is). ``bounds``: the model's bounding
     sphere ``(centre, radius)`` (:func:`bounding_sphere`; None: every frame is unsafe).
+    ``bvh_view``: a cell size in stage pixels adds ``camera ray`` and ``bvh view`` (reader_bvh.py;
+    with a mesh, its renderer and a BVH), which the green flag then calls instead of ``render``.
     ``helpers``: also ``load triangle`` (for authors copying blocks). ``parts``: more generators,
     each called with the :class:`ReaderBuilder` after the built-in ones."""
 
@@ -180,6 +189,7 @@ class ReaderSpec:
     bounds: tuple[tuple[float, float, float], float] | None = None
     helpers: bool = False
     pen_size: float = 2.0
+    bvh_view: int | None = None
     parts: list[Callable[["ReaderBuilder"], None]] = field(default_factory=list)
     # the textured filler (reader_texture.py): with it, every triangle is drawn by cells
     texture: TextureSpec | None = None
@@ -653,6 +663,8 @@ def _builtin_parts(spec: ReaderSpec) -> list[Callable[[ReaderBuilder], None]]:
             parts += [_camera_blocks, _render_blocks]
     if spec.bvh:
         parts.append(bvh_part)
+        if spec.bvh_view and spec.mesh and spec.renderer:
+            parts.append(bvh_view_part)
     if spec.textimage:
         parts.append(textimage_part)
     return parts
@@ -692,7 +704,8 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         if spec.mesh and spec.renderer:
             cam = spec.camera
             draw = [B.set_var("cam x", cam.x), B.set_var("cam y", cam.y), B.set_var("cam z", cam.z),
-                    B.set_var("cam yaw", cam.yaw), B.set_var("cam pitch", cam.pitch), B.call("render")]
+                    B.set_var("cam yaw", cam.yaw), B.set_var("cam pitch", cam.pitch),
+                    B.call("bvh view" if r.has("bvh view") else "render")]
             script += [B.if_(r.flag_guard, draw)] if r.flag_guard is not None else draw
         if script:
             b.when_flag(script)

@@ -27,8 +27,58 @@ from .sampling import hash_combine
 from .targets import Points
 
 
+def texel_albedo(scene: Scene, base: np.ndarray | None = None) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+    """For a textured scene: the albedo at sample points (``(points, tri_ids) -> (n, 3)``, stored
+    values in [0, 1]): the material colour x mean vertex colour of the point's triangle (as the
+    triangle albedo) x the texel of its material's texture at the point's UV (the image the
+    project holds, nearest texel, repeat addressing). So a ``"color"`` lightmap carries the
+    texture, and the reader's textured filler draws texture and light from the lightmap alone
+    (docs/formats-textures.md, "Drawing a textured triangle"). None when no material has a
+    texture image or the scene has no UVs. ``base``: the unlit (T, 3+) material x vertex colour when
+    ``scene`` carries lit vertex colours (the lighting stage's output)."""
+    ts = scene.artefacts.textures
+    textures = [t for t in getattr(ts, "textures", []) if getattr(t, "image", None) is not None]
+    if not textures or scene.tri_uvs is None or scene.n_triangles == 0:
+        return None
+    base = np.asarray(base if base is not None else scene.replace(face_albedo=None).triangle_albedo(),
+                      np.float64)[:, :3]
+    mats = np.asarray(scene.tri_material, np.int64)
+    image_of: dict[int, np.ndarray] = {}
+    for t in textures:
+        for m in t.materials:
+            image_of[int(m)] = t.image
+    pos, tris, uvs = scene.positions, scene.triangles, scene.tri_uvs
+
+    def albedo(points: np.ndarray, tri_ids: np.ndarray) -> np.ndarray:
+        tid = np.asarray(tri_ids, np.int64)
+        out = base[tid].copy()
+        for m, img in image_of.items():
+            sel = np.flatnonzero(mats[tid] == m)
+            if not len(sel):
+                continue
+            t = tid[sel]
+            a, b, c = (pos[tris[t, k]] for k in range(3))
+            # barycentrics of each point in its triangle (least squares in the triangle's plane)
+            e1, e2, d = b - a, c - a, np.asarray(points, np.float64)[sel] - a
+            d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+            p1, p2 = (d * e1).sum(1), (d * e2).sum(1)
+            den = d11 * d22 - d12 * d12
+            den = np.where(np.abs(den) > 0, den, 1.0)
+            w1, w2 = (d22 * p1 - d12 * p2) / den, (d11 * p2 - d12 * p1) / den
+            uv = (1.0 - w1 - w2)[:, None] * uvs[t, 0] + w1[:, None] * uvs[t, 1] + w2[:, None] * uvs[t, 2]
+            H, W = img.shape[:2]
+            col = np.floor(uv[:, 0] * W).astype(np.int64) % W
+            row = np.floor((1.0 - uv[:, 1]) * H).astype(np.int64) % H  # image row 0 at the top, v up
+            out[sel] = out[sel] * (img[row, col, :3].astype(np.float64) / 255.0)
+        return out
+
+    return albedo
+
+
 def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
-                   samples_per_texel: int = 1, albedo=None) -> tuple[Shader, Callable[[], dict]]:
+                   samples_per_texel: int = 1, albedo=None,
+                   per_point: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+                   ) -> tuple[Shader, Callable[[], dict]]:
     """A shading function for :func:`bake` built from ``bake/lighting``: at each sample, direct
     light (soft shadows), sky, ambient x AO (the lighting stage's own kernels), plus a final
     gather of bounced light from the lighting stage's per-triangle solution when
@@ -80,7 +130,9 @@ def light_function(scene: Scene, lighting_cfg, *, output: str = "light",
             st = baker.stat("bounces")
             g, _ = BounceRays(baker.ctx, pts, cfg.bounces.samples, st).gather(rad)
             e = e + g
-        if output == "color":
+        if output == "color" and per_point is not None:  # the texture at each point (texel_albedo)
+            alb = colmod.decode(np.clip(per_point(points, tri_ids), 0.0, 1.0), cfg.color_space)
+        elif output == "color":
             alb = colmod.decode(albedo[np.asarray(tri_ids, np.int64), :3], cfg.color_space)
         else:
             alb = np.ones((n, 3))
@@ -117,7 +169,8 @@ def scene_albedo(scene: Scene):
     return None
 
 
-def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=None) -> tuple[Scene, dict]:
+def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=None,
+                  texel_base: np.ndarray | None = None) -> tuple[Scene, dict]:
     """``lighting.target = "lightmap"``: light every texel of the textures stage's atlas with the
     lighting stage's kernels (:func:`light_function`, ``lighting.vertex_output`` = "light" or
     "color"), then splat, dilate and stitch (:func:`bake`). The image (RGBA uint8, opaque) goes
@@ -141,8 +194,10 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
     output = "light" if getattr(lighting_cfg, "vertex_output", "color") == "light" else "color"
     if albedo is None:
         albedo = scene_albedo(scene)
+    per_point = texel_albedo(scene, texel_base) if output == "color" else None
     shade, ray_stats = light_function(scene, lighting_cfg, output=output,
-                                      samples_per_texel=job.config.supersample ** 2, albedo=albedo)
+                                      samples_per_texel=job.config.supersample ** 2, albedo=albedo,
+                                      per_point=per_point)
     # samples that start inside or behind geometry are pushed out with rays (the same tracer the
     # textures module would build; the lighting package owns Embree)
     tracer = Tracer(scene.positions, scene.triangles, threads=0, scale=scene.scale()) if job.config.push_out else None
@@ -177,6 +232,7 @@ def bake_lightmap(scene: Scene, lighting_cfg, *, name: str = "lightmap", albedo=
     q = seam_error(img8[:, :, :3].astype(np.float64) / 255.0, job.atlas, res.seams)
     figs = dict(res.figures)
     figs.update({"output": output, "seam_error_8bit": q["max"], "rays": ray_stats(),
+                 "texture_in_lightmap": per_point is not None,
                  "encodings": {e: {**enc.sizes[e], "written": written[e]} for e in ENCODINGS},
                  "seconds": round(time.perf_counter() - t0, 6)})
     scene = scene.with_artefacts(lightmap_image=img8).with_artefacts(lightmap_encoded=enc)

@@ -189,7 +189,8 @@ def stage(scene: Scene, cfg: LightingConfig, *, albedo=None) -> tuple[Scene, Sta
         # per-triangle colours above (a fallback for flat fillers), then every texel of the atlas
         # the albedo of the unlit input: ``out`` carries lit vertex colours, which
         # Scene.triangle_albedo would multiply into the texels a second time
-        out, lightmap_figs = bake_lightmap(out, cfg, albedo=baker.albedo())
+        out, lightmap_figs = bake_lightmap(out, cfg, albedo=baker.albedo(),
+                                           texel_base=scene.replace(face_albedo=None).triangle_albedo())
         rec.effects.append({"name": "lightmap", "ran": True, "reason": "lighting.target = 'lightmap'",
                             "rays": int(sum(v["rays"] for v in lightmap_figs["rays"].values())),
                             "seconds": lightmap_figs["seconds"]})

@@ -35,6 +35,10 @@ BAKES = {  # name -> (corpus model, --set overrides)
     "box": ("box_textured_glb/BoxTextured.glb", []),
     "duck": ("duck_glb/Duck.glb", []),
     "box textimage": ("box_textured_glb/BoxTextured.glb", ['textures.encodings=["textimage"]']),
+    # texture and light baked together in the lightmap
+    "duck lightmap": ("duck_glb/Duck.glb", ["lighting.enabled=true", 'lighting.target="lightmap"',
+                                            'lighting.lights=[{kind="sun", direction=[0.5, -1, -0.4]}]',
+                                            "textures.lightmap.enabled=true", "textures.lightmap.resolution=128"]),
     # an engine's layout (issue 39): a soup with one list per coordinate, 0-based materials
     "box soup": ("box_textured_glb/BoxTextured.glb", ['export.faces="soup"', 'export.names.vertices=["X", "Y", "Z"]',
                                                       "export.index_base=0"]),

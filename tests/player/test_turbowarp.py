@@ -100,7 +100,8 @@ def played(tmp_path_factory):
         projects.append(("suzanne x y z", bake_to(suzanne, tmp / "suzanne xyz", {"export": PER_COORDINATE})))
     box = CORPUS / "box_textured_gltf_separate" / "BoxTextured.gltf"
     if box.exists():  # textured by default; white and unlit with its texture off (a dark backdrop)
-        projects.append(("box", bake_to(box, tmp / "box", {})))
+        # the flat filler on a textured model (the textured filler: test_textured.py)
+        projects.append(("box", bake_to(box, tmp / "box", {"export": {"texel_size": 0}})))
         projects.append(("white box", bake_to(box, tmp / "white", {"textures": {"enabled": False}})))
     run = turbowarp.run(projects, modes=("compiled", "interpreted"), repeat=1)
     return {"run": run, "projects": dict(projects), "previews": {k: _preview(p, LAYOUTS.get(k)) for k, p in projects}}

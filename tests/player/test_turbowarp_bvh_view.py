@@ -41,16 +41,10 @@ import turbowarp  # noqa: E402
 CELLS_WITHIN_1 = 0.99
 PIXELS_WITHIN_2 = 0.995
 
-BUNNY = {"transform": {"center": "base", "fit": 100},
-         "mesh": {"simplify": {"enabled": True, "target_triangles": 2000, "method": "meshopt", "fit_iterations": 0,
-                               "refine_rounds": 0, "peak_rounds": 0}},
-         "lighting": {"enabled": True, "target": "triangle", "ambient": [0.2, 0.2, 0.25],
-                      "lights": [{"kind": "sun", "direction": [0.5, -1, -0.4]}]},
-         "bsp": {"enabled": True}, "bvh": {"enabled": True}}
-CORNELL = {"lighting": {"enabled": True, "target": "triangle", "ambient": [0.1, 0.1, 0.1],
-                        "lights": [{"kind": "point", "position": [278.0, 450.0, -280.0], "radius": 30.0,
-                                    "intensity": 2.0e5}]},
-           "bvh": {"enabled": True, "layout": "wide4"}}
+# the benchmark's scenes (benchmarks/bench_bvh_view.py), so the test and the figures show the same bakes
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from bench_bvh_view import BUNNY, CORNELL  # noqa: E402
+
 # id -> (corpus file, sections, cell)
 PROJECTS = {
     "bunny": (("stanford_bunny_res1_obj", "stanford-bunny.obj"), BUNNY, 8),

@@ -34,6 +34,7 @@ WITHIN_1 = 0.9
 BAKES = {  # name -> (corpus model, --set overrides)
     "box": ("box_textured_glb/BoxTextured.glb", []),
     "duck": ("duck_glb/Duck.glb", []),
+    "duck packed": ("duck_glb/Duck.glb", ["export.pack=true"]),  # the loader rebuilds the texture list first
     "box textimage": ("box_textured_glb/BoxTextured.glb", ['textures.encodings=["textimage"]']),
     # texture and light baked together in the lightmap
     "duck lightmap": ("duck_glb/Duck.glb", ["lighting.enabled=true", 'lighting.target="lightmap"',

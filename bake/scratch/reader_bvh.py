@@ -5,6 +5,7 @@ Scratch VM (tests/scratch/test_scratch_readers.py). Generated only when the bake
 from __future__ import annotations
 
 from . import blocks as B
+from . import reader_mesh as RM
 from .blocks import add, and_, div, eq, floor, gt, item, lt, mod, mul, not_, or_, sub, var
 
 BIG = 1e300  # "no limit" for the ray's farthest distance (docs/formats-bvh.md)
@@ -275,15 +276,13 @@ def view_grid(cell: float) -> tuple[int, int]:
 
 def _material_of(r, t) -> B.Reporter:
     """The reporter of triangle t's material item number (1-based) in the mesh lists as written."""
-    from . import readers as R
-
     m = r.spec.mesh
-    walk = R._triangle_walk(m)
+    walk = RM.triangle_walk(m)
     if walk == "book":
-        return R._index(m, item(mul(t, 4), m.tris))
+        return RM.index(m, item(mul(t, 4), m.tris))
     if walk == "split":
-        return R._index(m, item(t, m.tris[3]))
-    return R._index(m, item(t, m.tris))
+        return RM.index(m, item(t, m.tris[3]))
+    return RM.index(m, item(t, m.tris))
 
 
 def bvh_view_part(r) -> None:
@@ -303,9 +302,6 @@ def bvh_view_part(r) -> None:
     projects back onto (sx, sy) (up to the 1e-10 by which the rounded sine and cosine miss
     ``s^2 + c^2 = 1``). The Python reference, with the same arithmetic in the same order, is
     ``bake.outputs.bvh_view``."""
-    from . import readers as R
-
-    m = r.spec.mesh
     cell = r.v("bvh cell", r.spec.bvh_view)
     for n in ("ray dx", "ray dy", "ray dz"):
         r.v(n)
@@ -323,7 +319,7 @@ def bvh_view_part(r) -> None:
     colour, last = r.v("_c"), r.v("_pc")
     hit = var("hit tri")
     paint = [
-        r.set("_c", R._colour(r, hit, _material_of(r, hit))),
+        r.set("_c", RM.colour(r, hit, _material_of(r, hit))),
         B.if_(eq(colour, last), [], [B.set_pen_color(colour), r.set("_pc", colour)]),
         B.goto_xy(gx, gy), B.pen_down(), B.pen_up(),
     ]

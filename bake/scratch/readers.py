@@ -96,6 +96,7 @@ from . import sb3
 from . import blocks as B
 from .blocks import add, div, eq, gt, item, lt, mul, not_, and_, sub, var
 from .reader_bvh import BIG, bvh_part, bvh_view_part
+from .reader_mesh import colour as _colour, index as _index, triangle_walk as _triangle_walk
 from .reader_texture import TextureSpec, cell_fill, load_blocks
 from .reader_textimage import alphabet_costumes, textimage_part
 
@@ -365,11 +366,6 @@ def _two_sided(spec: ReaderSpec) -> bool:
 
 
 # ---- mesh helper (authors' block)
-def _index(m: MeshNames, rep: Any) -> Any:
-    """A vertex or material number as a 1-based item number (0-based lists: + 1)."""
-    return rep if m.index_base == 1 else add(rep, 1)
-
-
 def _load_triangle(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     t = B.arg("t")
@@ -408,17 +404,6 @@ def _load_triangle(r: ReaderBuilder) -> None:
             body.append(r.set(f"{axis}{k}", value))
     body.append(r.set("tri color", _colour(r, t, material)))
     r.define("load triangle %s", ["t"], body)
-
-
-def _colour(r: ReaderBuilder, t, material) -> Any:
-    """The colour number of triangle t (``material``: the reporter of its material item in
-    ``tris``): its own, its material's."""
-    m = r.spec.mesh
-    if m.tri_colors:
-        return item(t, r.lst(m.tri_colors))
-    if m.mat_colors:
-        return item(material, r.lst(m.mat_colors))
-    return "#808080"
 
 
 # ---- camera and projection
@@ -486,13 +471,6 @@ def _camera_blocks(r: ReaderBuilder) -> None:
 
 
 # ---- the frame
-def _triangle_walk(m: MeshNames) -> str:
-    """How ``_b`` walks the triangles: ``book`` the items of one list of records (4 a
-    triangle), ``split`` the triangle's number in per-corner lists, ``soup`` its corners'
-    projected points (3 a triangle)."""
-    return "soup" if m.soup else "book" if isinstance(m.tris, str) else "split"
-
-
 def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring;
     :func:`_triangle_walk` for the other layouts)."""

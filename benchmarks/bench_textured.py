@@ -30,7 +30,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -39,7 +38,6 @@ sys.path.insert(0, str(REPO / "vm"))
 
 from bake import config, pipeline  # noqa: E402
 from bake.outputs import cells  # noqa: E402
-from bake.scratch.layout import join  # noqa: E402
 from bake.scratch.project import reader_spec  # noqa: E402
 from bench_player import frame_seconds  # noqa: E402
 
@@ -69,22 +67,11 @@ def _bake(model: Path, sections: dict, texel: int, out: Path):
 
 
 def _cells(res, lists) -> int:
+    """The cells the frame paints (the textured filler's frame in Python)."""
     spec = reader_spec(res.scene, res.config.export, lists)
-    if spec.texture is None:
-        return 0
-    from bake.bsp.traverse import draw_order
-
-    book = join(lists)
-    v = np.asarray(book["vertices"], np.float64).reshape(-1, 3)
-    t = np.asarray(book["triangles"], np.int64).reshape(-1, 4)
-    cam = spec.camera
-    order = (np.asarray(draw_order(lists["bsp nodes"], lists["bsp planes"], (cam.x, cam.y, cam.z), cull=False)) - 1
-             if "bsp nodes" in lists else np.arange(len(t)))
-    flat = (np.asarray(cells.decode_colour_items(lists["tri colors"]), np.int64) if "tri colors" in lists else
-            np.asarray(cells.decode_colour_items(lists["mat colors"]), np.int64)[t[:, 3] - 1])
-    pic = cells.picture(v, t, order, cam, spec.texture, lists[spec.texture.uvs],
-                        cells.texture_colours(spec.texture, lists), flat, t[:, 3] - 1, spec.two_sided)
-    return int((pic.colour >= 0).sum())
+    found = cells.frame(lists, spec.texture, res.config.export.names, res.config.export.faces,
+                        res.config.export.index_base, spec.two_sided) if spec.texture is not None else None
+    return int((found[0].colour >= 0).sum()) if found is not None else 0
 
 
 def vm_frames(paths: list[Path]) -> list[tuple[int, int]]:

@@ -57,22 +57,16 @@ def texture_colours(spec: TextureSpec, lists: dict[str, list]) -> np.ndarray:
             mode = "argb" if img.ndim == 3 and img.shape[2] == 4 else "rgb"
             parts.append(np.asarray(colors.image_to_list(img, mode, first_row="bottom"), np.int64))
         else:
-            parts.append(np.asarray(decode_colour_items(lists[s.list]), np.int64))
+            parts.append(colour_numbers(lists[s.list]))
     return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
 
-def decode_colour_items(items: Sequence[Any]) -> list[int]:
-    """Colour list items (numbers, or "#rrggbb" strings) as numbers."""
-    out = []
-    for x in items:
-        if isinstance(x, str) and x.startswith("#"):
-            h = x[1:]
-            if len(h) == 3:
-                h = "".join(c * 2 for c in h)
-            out.append(int(h, 16))
-        else:
-            out.append(int(float(x)))
-    return out
+def colour_numbers(items: Sequence[Any]) -> np.ndarray:
+    """Colour list items (numbers, or "#rrggbb" strings) as RGB colour numbers, as the pen reads
+    them (``bake.scratch.colors.decode_numbers``; an alpha byte is dropped)."""
+    arr = np.asarray(items)
+    rgba = decode_numbers(arr.astype(np.int64) if arr.dtype.kind in "iuf" else list(items)).astype(np.int64)
+    return (rgba[:, 0] << 16) | (rgba[:, 1] << 8) | rgba[:, 2]
 
 
 def _scratch_mod(a: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -223,18 +217,27 @@ def picture(verts: np.ndarray, tris: np.ndarray, order: np.ndarray, cam: readers
 def green_flag(lists: dict[str, list], report: dict[str, Any]) -> tuple[CellPicture, Any] | None:
     """The textured filler's green-flag frame of a bake (lists as written, report.json), and its
     camera; None when the bake's reader has no textured filler."""
-    from ..bsp.traverse import draw_order
-    from ..scratch.layout import join
-    from ..scratch.project import auto_camera
-
     export = next((st for st in report.get("stages", []) if st.get("name") == "export"), {})
     spec_json = export.get("details", {}).get("reader_texture")
     if not spec_json:
         return None
-    spec = TextureSpec.from_json(spec_json)
     ex = report.get("config", {}).get("export", {})
-    names = ex.get("names", {})
-    book = join(lists, names, ex.get("faces", "triangles"), ex.get("index_base", 1))
+    two = [1 if m.get("double_sided") else 0 for m in report.get("materials", [])]
+    return frame(lists, TextureSpec.from_json(spec_json), ex.get("names", {}), ex.get("faces", "triangles"),
+                 ex.get("index_base", 1), two)
+
+
+def frame(lists: dict[str, list], spec: TextureSpec, names: Any = None, faces: str = "triangles",
+          index_base: int = 1, two_sided: Sequence[int] = ()) -> tuple[CellPicture, Any] | None:
+    """The filler's frame for the lists as written in any layout (``export.names``, ``faces``,
+    ``index_base``) from the reader's green-flag camera, in its painter's order (the BSP walk's
+    ranges, or the list's order), and that camera; None without the mesh or UV lists."""
+    from ..bsp.traverse import draw_order
+    from ..scratch.layout import join, names_of
+    from ..scratch.project import auto_camera
+
+    names = names_of(names)
+    book = join(lists, names, faces, index_base)
     if "vertices" not in book or "triangles" not in book or spec.uvs not in lists:
         return None
     v = np.asarray(book["vertices"], np.float64).reshape(-1, 3)
@@ -245,16 +248,15 @@ def green_flag(lists: dict[str, list], report: dict[str, Any]) -> tuple[CellPict
                            np.int64) - 1
     else:
         order = np.arange(len(t))
-    tname, mname = names.get("triangle_colors", "tri colors"), names.get("materials", "mat colors")
+    tname, mname = names["triangle_colors"], names["materials"]
     material = t[:, 3] - 1
     if tname in lists and len(lists[tname]) == len(t):
-        flat = np.asarray(decode_colour_items(lists[tname]), np.int64)
+        flat = colour_numbers(lists[tname])
     elif mname in lists:
-        flat = np.asarray(decode_colour_items(lists[mname]), np.int64)[np.clip(material, 0, None)]
+        flat = colour_numbers(lists[mname])[np.clip(material, 0, None)]
     else:
         flat = np.full(len(t), 0x808080, np.int64)
-    two = [1 if m.get("double_sided") else 0 for m in report.get("materials", [])]
-    pic = picture(v, t, order, cam, spec, lists[spec.uvs], texture_colours(spec, lists), flat, material, two)
+    pic = picture(v, t, order, cam, spec, lists[spec.uvs], texture_colours(spec, lists), flat, material, two_sided)
     return pic, cam
 
 

@@ -82,8 +82,8 @@ def split(lists: list[ScratchList], names: Any, faces: str, index_base: int = 1)
         grid = np.asarray(lst.values, dtype=object if strings else None).reshape(-1, S)
         for j, name in enumerate(value):
             col = grid[:, j::k].ravel()  # component j of each record, in record order
-            numbered = lst.role in ("triangles", "quads") and labels[j][0] in "vm"
-            base = f" ({index_base}-based)" if numbered else ""
+            # every component of a triangle or quad record is a vertex or material number
+            base = f" ({index_base}-based)" if lst.role in ("triangles", "quads") else ""
             out.append(dataclasses.replace(
                 lst, name=name, values=tuple(col.tolist()) if strings else np.ascontiguousarray(col),
                 stride=1, doc=f"{labels[j]}{base} per {record}", pack_stride=0))
@@ -128,11 +128,11 @@ def join(lists: Mapping[str, list], names: Any = None, faces: str = "triangles",
     shift = 1 - int(index_base)
     if faces == "soup":
         if "triangles" in out:
-            mats = [int(m) + shift for m in out["triangles"]]
+            mats = np.asarray(out["triangles"], np.int64) + shift
             t = np.arange(1, 3 * len(mats) + 1, dtype=np.int64).reshape(-1, 3)
-            out["triangles"] = np.c_[t, np.asarray(mats, np.int64).reshape(-1, 1)].ravel().tolist()
+            out["triangles"] = np.c_[t, mats.reshape(-1, 1)].ravel().tolist()
     elif shift:
         for role in ("triangles", "quads"):
             if role in out:
-                out[role] = [int(x) + shift for x in out[role]]
+                out[role] = (np.asarray(out[role], np.int64) + shift).tolist()
     return out

@@ -132,7 +132,7 @@ def texture_spec(scene: Any, cfg: Any, values: dict[str, list]) -> TextureSpec |
     n_mat = max(len(getattr(scene, "materials", ())), 1)
     arts = scene.artefacts
 
-    def source(enc, name: str, image) -> TextureSource | None:
+    def source(enc, image) -> TextureSource | None:
         H, W = image.shape[:2]
         lists = {e: [lst.name for lst in enc.lists.get(e, [])] for e in ("list", "textimage")}
         if lists["list"] and lists["list"][0] in values:
@@ -143,7 +143,7 @@ def texture_spec(scene: Any, cfg: Any, values: dict[str, list]) -> TextureSpec |
 
     lm_enc = getattr(arts, "lightmap_encoded", None)
     if isinstance(n.lightmap_uvs, str) and n.lightmap_uvs in values and lm_enc is not None:
-        src = source(lm_enc, "lightmap", lm_enc.image)
+        src = source(lm_enc, lm_enc.image)
         if src is not None:
             return TextureSpec([src], [0] * n_mat, n.lightmap_uvs, cell)
     tex = arts.textures
@@ -154,7 +154,7 @@ def texture_spec(scene: Any, cfg: Any, values: dict[str, list]) -> TextureSpec |
     for t in tex.textures:
         if t.encoded is None or t.image is None:
             continue
-        src = source(t.encoded, t.name, t.image)
+        src = source(t.encoded, t.image)
         if src is None:
             continue
         for m in t.materials:

@@ -331,7 +331,10 @@ def _engine_check(project: Path, lists_json: Path, target: str) -> dict:
     names = {t.get("name") for t in proj.get("targets", []) if isinstance(t, dict)}
     if target not in ("Stage", "_stage_") and target not in names:
         raise ConfigError(f"--into-target: no sprite '{target}' in {project.name}")
-    return engine.check(proj, target, {n: len(v) for n, v in lists.items()}, reader_added=False)
+    from .scratch.project import all_numbers
+
+    return engine.check(proj, target, {n: len(v) for n, v in lists.items()}, reader_added=False,
+                        numbers={n for n, v in lists.items() if all_numbers(v)})
 
 
 def cmd_report(args: argparse.Namespace) -> int:

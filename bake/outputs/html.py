@@ -206,12 +206,14 @@ def _backdrop_words(rgb) -> str:
 def _views_section(views: list, mesh, bview=None) -> str:
     parts = [f"<h2>Previews</h2><p class=sub>Rendered from the written lists (rounded positions, encoded "
              f"colours: {_esc(mesh.colour_source)}) by scratch-bake's numpy rasterizer. Left: the painter's "
-             f"order a Scratch engine would draw ({_esc(views[0].stats['order']) if views else ''}); middle: "
+             f"order a Scratch engine would draw ({_esc(views[-1].stats['order']) if views else ''}); middle: "
              f"a depth-buffer render (the exact answer); right: where the painter shows another triangle in "
              f"a visibly different colour — <b class=bad>red</b>: wrong order; <b style='color:#e67e22'>"
              f"orange</b>: within a pixel of a triangle's edge; <b style='color:#b89600'>yellow</b>: the two "
              f"faces are coplanar to the bake (either order is right). The green flag's view is the "
-             f"project's stage: colours flat, as the reader sprite fills them, on its backdrop "
+             f"project's stage, in the reader sprite's order "
+             f"({_esc(views[0].stats['order']) if views else ''}): colours flat, as the reader sprite fills them, "
+             f"on its backdrop "
              f"({_backdrop_words(mesh.backdrop)}).</p>"]
     if bview is not None:
         j = bview.to_json()

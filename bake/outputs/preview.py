@@ -13,7 +13,8 @@ decoded lightmap exactly as a Scratch project loads them::
 The painter's image draws the triangles in the order a Scratch painter engine would: the BSP walk
 of ``bsp nodes`` / ``bsp planes`` for the camera (bake/bsp/traverse.py, the reference model of
 the reader sprite's ``bsp walk`` block), or, without a BSP tree, the book's painter's sort by
-centroid depth. The z-buffer image is the exact reference; the difference image marks pixels
+centroid depth, except the green flag's view, which draws as the reader sprite does: without a
+tree, in the list's order. The z-buffer image is the exact reference; the difference image marks pixels
 where the painter shows another triangle in a visibly different colour: red where the order is
 wrong, orange on a triangle's edge (rasterization of slivers), yellow where the two faces are
 coplanar to the bake (either order is right; see bake/bsp/verify.py).
@@ -228,8 +229,10 @@ def shade(mesh: Mesh, camera: Camera, im: Image, background=(1.0, 1.0, 1.0), *, 
 
 
 # --------------------------------------------------------------------------- painter's order
-def painter_order(mesh: Mesh, eye) -> tuple[np.ndarray, str]:
-    """0-based draw order for a painter's engine at ``eye`` and how it was made."""
+def painter_order(mesh: Mesh, eye, reader: bool = False) -> tuple[np.ndarray, str]:
+    """0-based draw order for a painter's engine at ``eye`` and how it was made. ``reader``: the
+    reader sprite's own order (its green flag), which without a BSP tree is the list's order (it
+    does not sort) where an engine would sort by centroid."""
     if mesh.bsp_nodes is not None:
         from ..bsp.traverse import draw_order, facing_flags
 
@@ -238,6 +241,8 @@ def painter_order(mesh: Mesh, eye) -> tuple[np.ndarray, str]:
         face = facing_flags(flat, verts, eye, mesh.two_sided)
         order = draw_order(mesh.bsp_nodes, mesh.bsp_planes, eye, flat, verts, mesh.two_sided, facing=face)
         return np.asarray(order, np.int64) - 1, "BSP walk of 'bsp nodes' / 'bsp planes'"
+    if reader:
+        return np.arange(len(mesh.tris)), "the list's order (no BSP tree: the reader sprite does not sort)"
     depth = np.linalg.norm(mesh.corners.mean(1) - np.asarray(eye, np.float64), axis=1)
     return np.argsort(-depth, kind="stable"), "painter's sort by centroid distance (no BSP tree)"
 
@@ -293,10 +298,10 @@ def _difference(p_id: np.ndarray, z_id: np.ndarray, tie: np.ndarray, edge: np.nd
 
 
 def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light: bool = True,
-                memo: Any = None) -> tuple[View, Image]:
+                memo: Any = None, reader: bool = False) -> tuple[View, Image]:
     """One view (see :func:`render_views`) and the painter's :class:`bake.render.Image` behind it
     (which triangle each pixel shows, how far it is from that triangle's edge). ``light``: see
-    :func:`shade`.
+    :func:`shade`; ``reader``: draw in the reader sprite's order (:func:`painter_order`).
 
     ``memo`` (a :class:`bake.cache.Memo`): the renders' geometry -- which triangle each pixel
     shows in both renders, the tie and edge pixels, the draw order's size and origin -- depends
@@ -310,13 +315,13 @@ def render_view(mesh: Mesh, name: str, cam: Camera, tie: float = 1e-5, *, light:
     key = geo = None
     if memo is not None:
         key = memo.key("preview", "preview geometry 1", cam, mesh.verts, mesh.tris, mesh.material, mesh.two_sided,
-                       _numbers(mesh.bsp_nodes), _numbers(mesh.bsp_planes), float(tie))
+                       _numbers(mesh.bsp_nodes), _numbers(mesh.bsp_planes), float(tie), reader)
         geo = memo.get("preview", key, lambda raw: _unpack_geometry(raw, cam),
                        "a preview's geometry for this camera")
         if geo is not None:
             memo.used("preview")
     if geo is None:
-        order, how = painter_order(mesh, cam.position)
+        order, how = painter_order(mesh, cam.position, reader)
         pim = render(cam, corners, mode="painter", order=order, two_sided=two)
         zim = render(cam, corners, mode="zbuffer", two_sided=two)
         t_mask, e_mask = mismatch_kinds(pim, zim, cam, corners, tie * diag)
@@ -389,7 +394,7 @@ def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1
     """Each camera of :func:`cameras`: painter's render in the engine's order, the z-buffer
     render, and their difference. ``tie``: faces this close (a fraction of the bounding-box
     diagonal) count as coplanar (:func:`difference`). ``memo``: see :func:`render_view`."""
-    return [render_view(mesh, name, cam, tie, light=name != "green flag", memo=memo)[0]
+    return [render_view(mesh, name, cam, tie, light=name != "green flag", memo=memo, reader=name == "green flag")[0]
             for name, cam in cameras(mesh.verts, width, height)]
 
 
@@ -397,7 +402,7 @@ def render_views(mesh: Mesh, width: int = 320, height: int = 240, tie: float = 1
 def stage_view(mesh: Mesh, cam, tie: float = 1e-5) -> tuple[View, Image]:
     """The green flag's stage at full size (480 x 360) for the reader camera ``cam``
     (``bake.scratch.readers.Camera``): what a Scratch player should show."""
-    return render_view(mesh, "stage", stage_camera(cam, 480), tie, light=False)
+    return render_view(mesh, "stage", stage_camera(cam, 480), tie, light=False, reader=True)
 
 
 def stage_agreement(stage: np.ndarray, view: View, painter: Image, *, margin: int = 2,

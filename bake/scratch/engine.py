@@ -17,7 +17,10 @@ Three things are said, each as a warning naming the lists (a problem under ``--s
   engine's ``Y`` and ``Z`` keep 8 items while ``X`` now has 505);
 * a green-flag script (following the broadcasts it sends, into the scripts that receive them, in
   the order they run) whose first use of a written list is ``delete all of``: the baked items are
-  gone before anything reads them.
+  gone before anything reads them;
+* a list the bake fills with numbers that held **text records** before (an item that is not a
+  number, such as a JSON array per vertex): an engine that parses its items will not read plain
+  numbers (seen in a public renderer whose ``Model`` list holds ``["x","y","z","u","v",nx,ny,nz]``).
 """
 
 from __future__ import annotations
@@ -46,11 +49,25 @@ def _targets(proj: dict) -> list[dict]:
 
 @dataclass
 class _Owner:
-    """A target's lists: id -> (name, length)."""
+    """A target's lists: id -> (name, length), and id -> the first item that is text, not a
+    number (None when every item is a number)."""
 
     name: str
     is_stage: bool
     lists: dict[str, tuple[str, int]] = field(default_factory=dict)
+    text: dict[str, str | None] = field(default_factory=dict)
+
+
+def _text_item(items: list, sample: int = 200) -> str | None:
+    """The first of a list's first ``sample`` items that Scratch would not read as a number (an
+    empty item is neither), or None (a list of records is text from its first item)."""
+    for x in items[:sample]:
+        if isinstance(x, str) and x.strip():
+            try:
+                float(x)
+            except ValueError:
+                return x
+    return None
 
 
 def _owners(proj: dict) -> list[_Owner]:
@@ -61,6 +78,7 @@ def _owners(proj: dict) -> list[_Owner]:
             if isinstance(entry, list) and entry and isinstance(entry[0], str):
                 items = entry[1] if len(entry) > 1 and isinstance(entry[1], list) else []
                 o.lists[str(lid)] = (entry[0], len(items))
+                o.text[str(lid)] = _text_item(items)
         out.append(o)
     return out
 
@@ -232,11 +250,13 @@ def _message(blocks: dict, value: Any) -> str | None:
     return None
 
 
-def check(proj: dict, target: str, written: dict[str, int], *, reader_added: bool) -> dict[str, Any]:
+def check(proj: dict, target: str, written: dict[str, int], *, reader_added: bool,
+          numbers: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
     """The engine check of ``proj`` (the author's project.json before the merge) for the lists the
     bake writes into ``target`` ("Stage" or a sprite): ``written`` maps each list name to the items
-    it now holds. Returns the report's ``engine`` section: per list the sprites and blocks that
-    read, write and empty it, and ``warnings`` (each a line naming the lists)."""
+    it now holds; ``numbers`` names those that hold numbers only. Returns the report's ``engine``
+    section: per list the sprites and blocks that read, write and empty it, and ``warnings`` (each
+    a line naming the lists)."""
     owners = _owners(proj)
     resolver = _Resolver(owners)
     where = "Stage" if target in ("Stage", "_stage_") else target
@@ -276,6 +296,15 @@ def check(proj: dict, target: str, written: dict[str, int], *, reader_added: boo
                             f"{_names(left)} beside it still {'has' if len(left) == 1 else 'have'} {old:,} (lists "
                             "the engine reads in step with it: bake them too under [export.names], or the engine "
                             "reads the new list against the old ones)")
+    was_text: dict[str, str] = {}
+    for n, ref in refs.items():
+        sample = by_owner[ref[0]].text.get(ref[1]) if ref is not None and n in numbers else None
+        if sample is not None:
+            was_text[n] = sample
+            shown = sample if len(sample) <= 40 else sample[:37] + "..."
+            warnings.append(f"export.into: '{n}' held text items (such as {shown!r}) and now holds numbers: an "
+                            "engine that parses its items (JSON arrays, joined records) will not read them (the "
+                            "layouts the bake writes: docs/engines.md)")
     emptied = sorted({(s, back[ref]) for s, ref in _first_uses(proj, resolver, written_refs)})
     for sprite, n in emptied:
         warnings.append(f"export.into: a green-flag script of '{sprite}' empties '{n}' (delete all of) before "
@@ -286,6 +315,7 @@ def check(proj: dict, target: str, written: dict[str, int], *, reader_added: boo
             table[n][k] = [{"sprite": s, "blocks": c} for s, c in sorted(table[n][k].items())]
     return {"target": where, "lists": table, "unread": unread if not reader_added else [],
             "parallel": parallel, "emptied_at_start": [{"sprite": s, "list": n} for s, n in emptied],
+            "text_replaced": was_text,
             "warnings": warnings}
 
 

@@ -84,6 +84,11 @@ def _bvh_spec(scene: Any, values: dict[str, list]) -> readers.BVHSpec | None:
                            nodes=names["nodes"], tris=names["tris"], ids=names["ids"])
 
 
+def all_numbers(items: list) -> bool:
+    """Whether a list's items are all numbers (as the lists' JSON holds them)."""
+    return np.asarray(items).dtype.kind in "iuf"
+
+
 def has_textimage(values: dict[str, list]) -> bool:
     """Did the bake write a TextImage string (a list item starting with the TextImage magic)?"""
     return any(len(items) and isinstance(items[0], str) and items[0].startswith(textimage.MAGIC + ",")
@@ -359,7 +364,8 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
                            "stale_lists": stale}
         if src_project is not None:  # what the author's engine does with the lists (scratch/engine.py)
             lengths = {n: len(values[n]) if n in values else len(v) for n, v in into_lists.items()}
-            found = engine.check(src_project, target, lengths, reader_added=bool(sprites))
+            found = engine.check(src_project, target, lengths, reader_added=bool(sprites),
+                                 numbers={n for n, v in values.items() if all_numbers(v)})
             details["into"]["engine"] = found
             for line in found["warnings"]:
                 if record is not None:

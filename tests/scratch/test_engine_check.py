@@ -83,6 +83,22 @@ def test_split_vertex_lists_replace_x_y_z_and_name_only_the_lists_left_beside_th
     assert warned and all("'colour'" in w and "'size'" in w and "'Y'" not in w.split("beside")[1] for w in warned)
 
 
+def test_numbers_written_over_text_records_are_named(tmp_path):
+    """Seen in a public renderer: its 'Model' list holds one JSON array per vertex, which its
+    blocks parse; a soup baked into it is read by name and replaced, but holds bare numbers the
+    engine cannot parse. The check says so; numbers over numbers say nothing."""
+    records = ['["1","2","3","0","0",0,1,0]', '["4","5","6","1","0",0,1,0]']
+    path = _write(tmp_path / "records.sb3", {"Model": records, "verts": ["1", "2.5", ""]}, {},
+                  [B.set_var("i", B.item(1, "Model")), B.set_var("i", B.item(1, "verts"))])
+    code, rep = _bake(tmp_path, path, 'export.names.triangles="Model"', "export.faces=\"soup\"")
+    eng = _export(rep)["details"]["into"]["engine"]
+    assert code == 0 and eng["text_replaced"] == {"Model": records[0]}
+    line = next(w for w in _export(rep)["warnings"] if "held text items" in w)
+    assert "'Model'" in line and "'verts'" not in line
+    code, _ = _bake(tmp_path, path, 'export.names.triangles="Model"', "export.faces=\"soup\"", strict=True)
+    assert code == 4
+
+
 def test_a_list_no_block_reads_is_named_and_a_read_one_is_not(tmp_path):
     path = _write(tmp_path / "points.sb3", {"verts": [1, 2, 3]}, {},
                   [B.set_var("i", B.item(1, "verts"))])

@@ -130,9 +130,8 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
     tree = build_tree(store, opt, center, scale)
     if remerge_fragments:
         t = time.perf_counter()
-        shown = None if ch is None else np.arange(store.attr.shape[2]) != ch
-        tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], opt.epsilon, opt.min_area,
-                                  shown=shown))
+        groups, shown = remerge_groups(scene, src, two, store.A, ch)
+        tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
         tree.stats["remerge_seconds"] = time.perf_counter() - t
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
@@ -143,9 +142,10 @@ def merges_before_build(scene: Scene, merge: bool) -> bool:
     """Does the coplanar merge run before the build? Not with vertex colours (a lit bake): which
     faces may merge would depend on the lit colours (equal face colours, vertex colours affine
     over the union), so a new light, AO sample count or exposure would give other source faces and
-    another tree. Without it the tree depends on the geometry, materials and sidedness only, and
-    the colours reach only the re-merge after the build (:func:`complete`), which runs in every
-    bake. Without vertex colours the face colours are the model's, not the lighting's."""
+    another tree. Without it the tree depends on the geometry, materials and sidedness only (the
+    re-merge after the build looks at no colour either: :func:`remerge_groups`); the colours
+    follow the triangles and the cut pieces they belong to (:func:`complete`). Without vertex
+    colours the face colours are the model's, not the lighting's."""
     return bool(merge) and scene.vertex_colors is None
 
 
@@ -285,14 +285,30 @@ def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded,
         need = vid < 0
         if need.any():
             vcols = cattr[need][:, vc_s] if vc_s else np.zeros((int(need.sum()), 0))
-            key = np.concatenate([cpos[need], vcols], 1)
-            uniq, inv = np.unique(key, axis=0, return_inverse=True)
+            # one vertex per position and colour -- decided without the colours, so that the
+            # vertices, hence the triangles written, do not change with the lighting (the
+            # previews' geometry is reused after a lighting change): two cut corners at one place
+            # have one colour for every lighting when their colours are made of the same input
+            # vertices' (one edge's two ends, or one triangle's three corners) with the same
+            # weights; the tape replayed on fixed random values per scene vertex tells them
+            # apart (equal values: the same vertices and weights), and the corner first used
+            # gives the vertex its colour. Numbered in the order the output first uses them.
+            if vc_s and store.tape is None:  # (bake.bsp.stage.build without a tape: by colour)
+                ident = vcols
+            else:
+                ident = _identities(scene, src, store, cattr[need]) if vc_s else np.zeros((int(need.sum()), 0))
+            key = np.concatenate([cpos[need], ident], 1)
+            uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            by_use = np.argsort(first, kind="stable")
+            rank = np.empty(len(first), np.int64)
+            rank[by_use] = np.arange(len(first))
+            uniq, first, inv = uniq[by_use], first[by_use], rank[inv.ravel()]
             vid = vid.copy()
             vid[need] = V + inv.ravel()
             new_pos = uniq[:, :3] * scale + center
             if scene.position_decimals is not None:  # made on the grid: keep them exactly there
                 new_pos = round_positions(new_pos, scene.position_decimals)
-            new_vc = uniq[:, 3:]
+            new_vc = vcols[first]
             n_new = len(uniq)
             if replay is not None:
                 replay = {"ids": cattr[need][:, store.tape.ch].astype(np.int64), "pos": cpos[need],
@@ -317,6 +333,18 @@ def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded,
             "vertex_colors": vcol, "tri_lightmap_uvs": out_lm, "new_vertices": n_new,
             "source_triangle": out_src_tri, "source_face": out_face, "input_source_face": in_face,
             "replay": replay}
+
+
+def _identities(scene: Scene, src: SourceFaces, store: FaceStore, cattr: np.ndarray) -> np.ndarray:
+    """Per cut corner (its attributes ``cattr``, with the tape's corner ids): what its colour is
+    made of, as values that do not depend on the colours (:func:`split_layout`): the tape replayed
+    on fixed random values per scene vertex, on a grid of 2^-20 (corners reached along two ways
+    differ in the last bits only)."""
+    rnd = np.random.default_rng(41).random((scene.n_vertices, 2))
+    base = rnd[scene.triangles][src.kept_triangles].reshape(-1, 2)
+    vals = Tape.replay(store.tape.state(), base)
+    ids = cattr[:, store.tape.ch].astype(np.int64)
+    return np.round(vals[ids] * 2.0 ** 20)
 
 
 def apex_first(positions: np.ndarray, tris: np.ndarray, *corner_arrays: np.ndarray | None) -> tuple:
@@ -366,9 +394,10 @@ def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragmen
     textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and, without
     vertex colours, the merge groups (material, sidedness, face colour and albedo, as the group
     numbers :func:`_groups` gives: the coplanar merge before the build reads them). With vertex
-    colours (a lit bake) nothing merges before the build (:func:`merges_before_build`), so the
-    tree is built on geometry, materials and sidedness alone; the colours and groups reach only
-    the re-merge after it, which :func:`complete` runs in every bake."""
+    colours (a lit bake) nothing merges before the build (:func:`merges_before_build`) and the
+    re-merge joins only pieces of one input triangle without looking at colours
+    (:func:`remerge_groups`), so the tree is built on geometry, materials and sidedness alone and
+    every lit colour follows the triangle or piece it belongs to (:func:`complete`)."""
     two = tri_two_sided(scene)
     mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
     return ["bsp tree 3", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
@@ -392,8 +421,28 @@ def _plain(v: Any) -> Any:
     return v.item() if isinstance(v, np.generic) else v
 
 
-def grow(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
-    """The tree as the build leaves it, before the re-merge, as plain arrays (what the memo keeps;
+def remerge_groups(scene: Scene, src: SourceFaces, two: np.ndarray, A: int, ch: int | None
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+    """What the re-merge may join, per source face, and the attribute channels that must be affine
+    over a join. With vertex colours (a lit bake) only fragments of one source face (one input
+    triangle: nothing merged before the build) join, and the colours are not looked at: a source
+    triangle's colours are affine over it and its face colour is one, so such a join shows the
+    colours it had, whatever they are, and no colour decides a join. Without vertex colours: the
+    merge groups (material, sidedness, face colour, albedo; part of the tree's key) and every
+    attribute."""
+    if scene.vertex_colors is None:
+        first_tri = src.tri_list[src.tri_start[:-1]]
+        return _groups(scene, two)[first_tri], None
+    _, at = _attributes(scene)
+    shown = np.ones(A, bool)
+    shown[at["vertex_color"]] = False
+    if ch is not None:
+        shown[ch] = False
+    return np.arange(len(src.count)), shown
+
+
+def grow(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
+    """The tree as the build and the re-merge leave it, as plain arrays (what the memo keeps;
     :func:`complete` makes the stage's result of it for any colours): the store and tree
     (:func:`_freeze`), the build's figures, and with vertex colours the tape of the cuts
     (:class:`bake.bsp.split.Tape`), from which :func:`complete` computes every cut corner's colour
@@ -410,6 +459,11 @@ def grow(scene: Scene, opt: BuildOptions, merge: bool) -> dict:
     if scene.position_decimals is not None:
         store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
+    if remerge_fragments:
+        t = time.perf_counter()
+        groups, shown = remerge_groups(scene, src, two, store.A, ch)
+        tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
+        tree.stats["remerge_seconds"] = time.perf_counter() - t
     t_cross = time.perf_counter()
     # parts that pass through each other: cuts no tree avoids (bake/bsp/crossing.py)
     crossed = crossing.summary(written_positions(scene), scene.triangles, opt.epsilon * scale)
@@ -430,8 +484,8 @@ def complete(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bo
     """The stage's result (what :func:`finish` turns into the scene and record) from a
     :func:`grow` of a scene that differs from this one at most in its colours: the cut corners'
     vertex colours computed again from the tape (exactly as the build computes them), the
-    re-merge with this scene's groups and colours, the encoding, the split layout and the
-    figures. A cold bake takes the same path, so a reused tree gives the cold bytes."""
+    encoding, the split layout and the figures. A cold bake takes the same path, so a reused tree
+    gives the cold bytes."""
     t0 = time.perf_counter()
     T_in = scene.n_triangles
     center, scale = frame(scene)
@@ -447,13 +501,6 @@ def complete(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bo
         vals = Tape.replay(grown["tape"], corners)
         ids = store.attr[:, :, store.tape.ch].astype(np.int64)
         store.attr[:, :, at["vertex_color"]] = vals[np.clip(ids, 0, len(vals) - 1)]
-    if remerge_fragments:
-        t = time.perf_counter()
-        shown = None if store.tape is None else np.arange(store.A) != store.tape.ch
-        first_tri = src.tri_list[src.tri_start[:-1]]
-        tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], topt.epsilon, topt.min_area,
-                                  shown=shown))
-        tree.stats["remerge_seconds"] = time.perf_counter() - t
     enc = encode(tree, fragment_triangles(store, src))
     layout = split_layout(scene, store, src, enc, center, scale)
     nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
@@ -514,7 +561,7 @@ def complete(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bo
 
 def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
     """Build the tree and the split layout (:func:`grow`, then :func:`complete`)."""
-    return complete(scene, opt, merge, remerge_fragments, grow(scene, opt, merge))
+    return complete(scene, opt, merge, remerge_fragments, grow(scene, opt, merge, remerge_fragments))
 
 
 def _freeze(store: FaceStore, tree: Tree) -> dict:
@@ -581,7 +628,7 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
     if reused:
         memo.used("bsp")
     else:
-        grown = grow(scene, opt, merge)
+        grown = grow(scene, opt, merge, remerge_fragments)
         if memo is not None:
             memo.put("bsp", key, grown)
     made = complete(scene, opt, merge, remerge_fragments, grown)

@@ -86,6 +86,7 @@ def run(cfg: Path, sets: list[str], out: Path, code: Path) -> dict:
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     rep = json.loads((out / "report.json").read_text())
+    bsp = next(s for s in rep["stages"] if s["name"] == "bsp")
     stages = {}
     for s in rep["stages"]:
         d = s.get("details") or {}
@@ -101,8 +102,9 @@ def run(cfg: Path, sets: list[str], out: Path, code: Path) -> dict:
     return {"wall": round(wall, 3), "cpu": round(cpu, 3), "stages": stages,
             "outside_stages": round(wall - sum(v["seconds"] for v in stages.values()), 3),
             "memos_reused": (rep.get("cache") or {}).get("memos_reused", []),
-            "bsp": {k: next(s for s in rep["stages"] if s["name"] == "bsp")["details"].get(k)
-                    for k in ("merged_triangles", "remerged_fragments", "splits", "inflation")}}
+            "bsp": {**{k: bsp["details"].get(k) for k in ("merged_triangles", "remerged_fragments", "splits",
+                                                            "inflation")},
+                    "triangles_out": bsp["counts_out"]["triangles"], "vertices_out": bsp["counts_out"]["vertices"]}}
 
 
 def same_lists(a: Path, b: Path) -> bool:

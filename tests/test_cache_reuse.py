@@ -355,8 +355,12 @@ def test_a_lighting_change_reuses_the_tree_and_gives_the_lists_of_a_cold_bake(li
     root, cfg_path, _, _ = lit
     out = tmp_path / "warm"
     bake(cfg_path, out)
+    geometry = {n: (out / "lists" / n).read_bytes() for n in ("verts.txt", "tris.txt", "bsp_nodes.txt",
+                                                              "bsp_planes.txt")}
     rep = bake(cfg_path, out, change)
     assert "bsp" in _memo_kinds(rep)
+    # the written geometry is the lighting's no more: the same vertices, triangles and tree
+    assert {n: (out / "lists" / n).read_bytes() for n in geometry} == geometry
     bsp = _stage(rep, "bsp")
     assert bsp["details"]["tree_reused"]["reused"] is True
     cold = bake(cfg_path, tmp_path / "cold", change, "cache.dir=\"none\"")

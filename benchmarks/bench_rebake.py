@@ -147,6 +147,38 @@ def one(name: str, tmp: Path, code: Path) -> dict:
     return row
 
 
+LABELS = {"bunny_2k": "2k bunny", "house": "house"}
+
+
+def table(doc: dict) -> dict:
+    """README's rows (``"table"`` in the results): per config and run label, the medians and the
+    figures README shows, derived here (tools/doc_tables.py only formats)."""
+    rows = {}
+    for name in CONFIGS:
+        for label, run_ in doc.items():
+            if label in ("table", "command") or not isinstance(run_, dict) or name not in run_.get("configs", {}):
+                continue
+            c = run_["configs"][name]
+            runs = c["runs"]
+
+            def med(f):
+                return statistics.median(f(r) for r in runs)
+
+            first = runs[0]
+            bsp = sorted({f"{first[k]['stages']['bsp']['how']} {first[k]['stages']['bsp']['seconds']:.2f} s"
+                          for k in ("ao", "sun")})
+            rows[f"{name} {label}"] = {
+                "config": LABELS[name], "code": label.replace("_", " "), "runs": len(runs),
+                "cold": med(lambda r: r["cold"]["wall"]), "ao": med(lambda r: r["ao"]["wall"]),
+                "sun": med(lambda r: r["sun"]["wall"]), **c["median"],
+                "bsp_how": "; ".join(bsp), "memos": json.dumps(first["ao"]["memos_reused"]),
+                "triangles_cold": first["cold"]["bsp"]["triangles_out"],
+                "triangles_ao": first["cold_ao"]["bsp"]["triangles_out"],
+                "goal": f"≤ {c['goal']:.0%}: {'met' if c['met'] else 'not met'}",
+                "lists_equal_cold": "yes" if c["lists_equal_cold"] else "NO"}
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=1)
@@ -154,7 +186,13 @@ def main() -> None:
     ap.add_argument("--label", default="after")
     ap.add_argument("--only", choices=sorted(CONFIGS), action="append")
     ap.add_argument("--no-bytecode", action="store_true", help="keep PYTHONDONTWRITEBYTECODE as it is")
+    ap.add_argument("--table-only", action="store_true", help="only rebuild the README rows from the results")
     a = ap.parse_args()
+    if a.table_only:
+        doc = json.loads(RESULTS.read_text())
+        doc["table"] = table(doc)
+        RESULTS.write_text(json.dumps(doc, indent=1) + "\n")
+        return
     a.code = a.code.resolve()
     names = a.only or list(CONFIGS)
     res: dict = {}
@@ -174,6 +212,9 @@ def main() -> None:
                     "machine": platform.machine(), "python": platform.python_version(),
                     "cpus": os.cpu_count(), "when": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                     "configs": res}
+    doc["command"] = "benchmarks/bench_rebake.py --code <88de006 extracted> --label before_88de006; " \
+                     "benchmarks/bench_rebake.py --repeat 3"
+    doc["table"] = table(doc)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {RESULTS}")

@@ -1,9 +1,9 @@
 """Reuse inside a stage that must run again (bake.cache.Memo): the BSP tree when only colours
-changed (bake/bsp/stage.py: tree_key_parts, recolour) and the previews' geometry
+changed (bake/bsp/stage.py: tree_key_parts, grow, complete) and the previews' geometry
 (bake/outputs/preview.py: render_view). Every reuse must give the bytes a cold computation gives;
-a colour change that alters a decision the build made with colours (merge groups, merges, which
-cut corners became one vertex) must build the tree again; a damaged memo is ignored with a
-warning."""
+with lit colours (vertex colours) no colour change builds the tree again (nothing merges before
+the build; the re-merge after it runs with the new colours in every bake); a damaged memo is
+ignored with a warning."""
 
 from __future__ import annotations
 
@@ -110,9 +110,9 @@ def test_a_reused_tree_gives_the_bytes_of_a_cold_build(lit):
     memo = cache_mod.Memo(cache_mod.MemoryStore())
     first, rec1 = _run(scene, cfg, memo)
     assert rec1.details["tree_reused"]["reused"] is False
-    # the case worth testing: cuts made new vertices (their colours come from the tape), faces merged
-    assert rec1.details["new_vertices"] > 0 and rec1.details["splits"] > 0 and rec1.details["merged_triangles"] > 0
-    assert rec1.details["remerged_fragments"] > 0  # and the re-merge joined fragments (checked again on reuse)
+    # the case worth testing: cuts made new vertices (their colours come from the tape); with lit
+    # colours nothing merges before the build
+    assert rec1.details["new_vertices"] > 0 and rec1.details["splits"] > 0 and rec1.details["merged_triangles"] == 0
     # every colour darker by the same factor (an exposure change): the same merges and vertices
     vc = scene.vertex_colors.copy()
     vc[:, :3] *= 0.8
@@ -131,35 +131,38 @@ def test_a_reused_tree_gives_the_bytes_of_a_cold_build(lit):
     assert not np.array_equal(warm.face_colors, first.face_colors)
 
 
-def test_colours_that_change_the_merges_build_the_tree_again(lit):
+def test_colours_that_change_the_joins_reuse_the_tree_and_give_the_cold_bytes(lit):
+    """Colours no longer affine over any merge or join: the tree is reused (the re-merge runs with
+    the new colours), the bytes are a cold build's. (Before issue 41 such colours built the tree
+    again; tests/bsp/test_tree_reuse.py has a scene whose joins they change.)"""
     _, _, cfg, scene = lit
     memo = cache_mod.Memo(cache_mod.MemoryStore())
     _run(scene, cfg, memo)
     rng = np.random.default_rng(5)
     vc = scene.vertex_colors.copy()
-    vc[:, :3] = rng.random((len(vc), 3))  # no longer affine over the merged faces
+    vc[:, :3] = rng.random((len(vc), 3))
     other = _recoloured(scene, vc)
     warm, rec = _run(other, cfg, memo)
-    assert rec.details["tree_reused"]["reused"] is False
-    assert memo.reused == []  # a tree found but not usable for these colours is not called reused
-    cold, _ = bsp_stage(other, cfg.bsp)
+    assert rec.details["tree_reused"]["reused"] is True
+    assert memo.reused == ["bsp"]
+    cold, rec_cold = bsp_stage(other, cfg.bsp)
     same_scene(warm, cold)
-    assert rec.details["merged_triangles"] != _run(scene, cfg, None)[1].details["merged_triangles"]
+    assert rec.counts_out == rec_cold.counts_out and rec.warnings == rec_cold.warnings
+    assert rec.details["remerged_fragments"] == rec_cold.details["remerged_fragments"]
 
 
-def test_face_colours_that_change_the_merges_build_the_tree_again(lit):
-    """The merge groups are not part of the key with vertex colours; new groups that change the
-    merges are caught when the merges are made again, and the tree is built again."""
+def test_face_colours_that_change_the_groups_reuse_the_tree_and_give_the_cold_bytes(lit):
+    """New face colours regroup the faces (the re-merge joins only within a group): the tree is
+    reused, the re-merge runs with the new groups, the bytes are a cold build's."""
     _, _, cfg, scene = lit
     memo = cache_mod.Memo(cache_mod.MemoryStore())
-    _, rec0 = _run(scene, cfg, memo)
+    _run(scene, cfg, memo)
     fc = scene.face_colors.copy()
-    fc[::2, :3] = 0.5  # every other triangle one colour: other groups, the plate's merges broken
+    fc[::2, :3] = 0.5  # every other triangle one colour: other groups
     other = _recoloured(scene, scene.vertex_colors, fc)
     warm, rec = _run(other, cfg, memo)
-    assert rec.details["tree_reused"]["reused"] is False
-    assert memo.reused == []
-    assert rec.details["merged_triangles"] != rec0.details["merged_triangles"]
+    assert rec.details["tree_reused"]["reused"] is True
+    assert memo.reused == ["bsp"]
     cold, _ = bsp_stage(other, cfg.bsp)
     same_scene(warm, cold)
 
@@ -343,21 +346,29 @@ def test_a_trace_with_subdivision_is_not_reused(lit, tmp_path):
     assert outputs(out) == outputs(tmp_path / "cold")
 
 
-def test_the_remerge_check_fails_when_colours_break_a_join(lit):
-    """The re-merge joins coplanar fragments only where the vertex colours are affine over the
-    union; on reuse it runs again with the new colours (bsp.stage._remerged_again). Colours that
-    are no longer affine over a joined union must fail the check (and the tree is built again)."""
-    import dataclasses
-
-    from bake.bsp import stage as S
-
-    _, _, cfg, scene = lit
-    opt = S.options(cfg.bsp)
-    made = S.make(scene, opt, True, True)
-    state = made["recolour"]
-    assert "remerge" in state
-    src, two, _ = S.merged(scene, dataclasses.replace(opt, epsilon=S.tolerance(scene, opt)), True, tape=True)
-    corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
-    assert S._remerged_again(scene, opt, src, two, state, S.Tape.replay(state["tape"], corners))
-    noisy = corners + np.random.default_rng(3).random(corners.shape) * 0.5
-    assert not S._remerged_again(scene, opt, src, two, state, S.Tape.replay(state["tape"], noisy))
+@pytest.mark.parametrize("change", ["lighting.ao.samples=9", "lighting.lights[0].direction=[0.2, -1.0, 0.5]",
+                                    "lighting.ambient=[0.3, 0.25, 0.2]"], ids=["ao-samples", "sun-direction", "ambient"])
+def test_a_lighting_change_reuses_the_tree_and_gives_the_lists_of_a_cold_bake(lit, tmp_path, change):
+    """Issue 41: a re-bake after a lighting key that needs new rays (AO samples, the sun's
+    direction) or changes every colour reuses the BSP tree (report.json says so), and writes the
+    lists a cold bake of the changed config writes, byte for byte."""
+    root, cfg_path, _, _ = lit
+    out = tmp_path / "warm"
+    bake(cfg_path, out)
+    geometry = {n: (out / "lists" / n).read_bytes() for n in ("verts.txt", "tris.txt", "bsp_nodes.txt",
+                                                              "bsp_planes.txt")}
+    rep = bake(cfg_path, out, change)
+    assert "bsp" in _memo_kinds(rep)
+    # the written geometry is the lighting's no more: the same vertices, triangles and tree
+    assert {n: (out / "lists" / n).read_bytes() for n in geometry} == geometry
+    bsp = _stage(rep, "bsp")
+    assert bsp["details"]["tree_reused"]["reused"] is True
+    cold = bake(cfg_path, tmp_path / "cold", change, "cache.dir=\"none\"")
+    assert outputs(out) == outputs(tmp_path / "cold")
+    lists = sorted(p.name for p in (out / "lists").iterdir())
+    assert lists and lists == sorted(p.name for p in (tmp_path / "cold" / "lists").iterdir())
+    for name in ["lists.json", *(f"lists/{n}" for n in lists)]:
+        assert (out / name).read_bytes() == (tmp_path / "cold" / name).read_bytes(), name
+    c = _stage(cold, "bsp")
+    assert bsp["counts_out"] == c["counts_out"] and bsp["warnings"] == c["warnings"]
+    assert bsp["details"]["remerged_fragments"] == c["details"]["remerged_fragments"]

@@ -38,7 +38,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scipy.spatial import ConvexHull
 
 from .split import FaceStore, split_faces
 
@@ -243,6 +242,8 @@ def hull_peel(store: FaceStore, ids: np.ndarray, eps: float, hull_above: int = 5
     H = P
     if len(P) > hull_above:  # only the hull's corners matter for a plane's extreme distances
         try:
+            from scipy.spatial import ConvexHull  # (imported here: a bake that reuses its tree needs no scipy)
+
             H = P[ConvexHull(P).vertices]
         except Exception:  # flat or degenerate point set: keep every point
             H = P

@@ -28,8 +28,6 @@ touch or sit apart do not (docs/formats-bsp.md, Known limits).
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 _MAX_CELLS = 64  # a face over more grid cells than this is paired by boxes (see the docstring)
 _CHUNK = 1 << 22  # entries per temporary array (pairs, or boxes compared)
@@ -215,6 +213,9 @@ def parts(V: np.ndarray, F: np.ndarray, ids: np.ndarray | None = None) -> np.nda
     o = np.lexsort((tri, e[:, 1], e[:, 0]))
     e, tri = e[o], tri[o]
     same = (e[1:] == e[:-1]).all(axis=1)  # consecutive entries of one edge: join their triangles
+    from scipy.sparse import coo_matrix  # (imported here: a bake that reuses its tree needs no scipy)
+    from scipy.sparse.csgraph import connected_components
+
     g = coo_matrix((np.ones(int(same.sum()), np.int8), (tri[:-1][same], tri[1:][same])), shape=(T, T))
     _, lab = connected_components(g, directed=False)
     _, first, inv = np.unique(lab, return_index=True, return_inverse=True)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..cache import active_memo, content_digest
+from ..cache import active_memo
 from ..record import StageRecord
 from ..scene import BSPArtefact, Scene, ScratchList
 from . import crossing
@@ -104,9 +104,9 @@ def tri_two_sided(scene: Scene) -> np.ndarray:
     return two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True,
-          pre_remerge: list | None = None):
-    """Everything but writing the scene: (store, sources, tree, encoded, frame).
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True):
+    """Everything but writing the scene: (store, sources, tree, encoded, frame), in one go (the
+    stage itself goes through :func:`grow` and :func:`complete`, which give the same result).
 
     With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
     they will be written: input positions rounded, every vertex a cut makes snapped to the grid,
@@ -116,8 +116,7 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
     ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
     from (:class:`bake.bsp.split.Tape`; the result is the same either way: the corner ids it adds
     decide neither a merge nor a re-merge). ``remerge_fragments``: join coplanar fragments drawn
-    together again (:func:`bake.bsp.remerge.remerge`); a list given as ``pre_remerge`` receives a
-    copy of ``(store, tree)`` as they were before it (:func:`recolour` runs it again on them)."""
+    together again (:func:`bake.bsp.remerge.remerge`)."""
     center, scale = frame(scene)
     opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
     src, two, ch = merged(scene, opt, merge, tape)
@@ -130,16 +129,24 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
         store.grid = (center, scale, scene.position_decimals)
     tree = build_tree(store, opt, center, scale)
     if remerge_fragments:
-        if pre_remerge is not None:
-            pre_remerge.append(_freeze(*copy.deepcopy((store, tree))))
         t = time.perf_counter()
-        shown = None if ch is None else np.arange(store.attr.shape[2]) != ch
-        tree.stats.update(remerge(store, tree, _groups(scene, two)[first_tri], opt.epsilon, opt.min_area,
-                                  shown=shown))
+        groups, shown = remerge_groups(scene, src, two, store.A, ch)
+        tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
         tree.stats["remerge_seconds"] = time.perf_counter() - t
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
     return store, src, tree, enc, (center, scale)
+
+
+def merges_before_build(scene: Scene, merge: bool) -> bool:
+    """Does the coplanar merge run before the build? Not with vertex colours (a lit bake): which
+    faces may merge would depend on the lit colours (equal face colours, vertex colours affine
+    over the union), so a new light, AO sample count or exposure would give other source faces and
+    another tree. Without it the tree depends on the geometry, materials and sidedness only (the
+    re-merge after the build looks at no colour either: :func:`remerge_groups`); the colours
+    follow the triangles and the cut pieces they belong to (:func:`complete`). Without vertex
+    colours the face colours are the model's, not the lighting's."""
+    return bool(merge) and scene.vertex_colors is None
 
 
 def merged(scene: Scene, opt: BuildOptions, merge: bool, tape: bool = False) -> tuple[SourceFaces, np.ndarray, int | None]:
@@ -168,7 +175,7 @@ def merged(scene: Scene, opt: BuildOptions, merge: bool, tape: bool = False) -> 
     if ch is not None:
         seen[:, ch] = False  # (an id is not an attribute: it never decides a merge)
     src = merge_coplanar(pos_n, tris, attr, _groups(scene, two)[keep], opt.epsilon, opt.min_area,
-                         enabled=merge, seen=seen)
+                         enabled=merges_before_build(scene, merge), seen=seen)
     src.tri_list = keep[src.tri_list]  # scene triangle numbers
     src.dropped = int(scene.n_triangles - len(keep))
     src.kept_triangles = keep
@@ -261,7 +268,7 @@ def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded,
     new_vc = np.zeros((0, 4))
     n_new = 0
     # with a tape: the cut corners that became new vertices (their corner ids and positions) and
-    # the vertex each became, to give them other colours later (recolour)
+    # the vertex each became
     replay = None if store.tape is None else {"ids": np.zeros(0, np.int64), "pos": np.zeros((0, 3)),
                                               "inv": np.zeros(0, np.int64)}
     if len(cf):
@@ -278,14 +285,30 @@ def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded,
         need = vid < 0
         if need.any():
             vcols = cattr[need][:, vc_s] if vc_s else np.zeros((int(need.sum()), 0))
-            key = np.concatenate([cpos[need], vcols], 1)
-            uniq, inv = np.unique(key, axis=0, return_inverse=True)
+            # one vertex per position and colour -- decided without the colours, so that the
+            # vertices, hence the triangles written, do not change with the lighting (the
+            # previews' geometry is reused after a lighting change): two cut corners at one place
+            # have one colour for every lighting when their colours are made of the same input
+            # vertices' (one edge's two ends, or one triangle's three corners) with the same
+            # weights; the tape replayed on fixed random values per scene vertex tells them
+            # apart (equal values: the same vertices and weights), and the corner first used
+            # gives the vertex its colour. Numbered in the order the output first uses them.
+            if vc_s and store.tape is None:  # (bake.bsp.stage.build without a tape: by colour)
+                ident = vcols
+            else:
+                ident = _identities(scene, src, store, cattr[need]) if vc_s else np.zeros((int(need.sum()), 0))
+            key = np.concatenate([cpos[need], ident], 1)
+            uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            by_use = np.argsort(first, kind="stable")
+            rank = np.empty(len(first), np.int64)
+            rank[by_use] = np.arange(len(first))
+            uniq, first, inv = uniq[by_use], first[by_use], rank[inv.ravel()]
             vid = vid.copy()
             vid[need] = V + inv.ravel()
             new_pos = uniq[:, :3] * scale + center
             if scene.position_decimals is not None:  # made on the grid: keep them exactly there
                 new_pos = round_positions(new_pos, scene.position_decimals)
-            new_vc = uniq[:, 3:]
+            new_vc = vcols[first]
             n_new = len(uniq)
             if replay is not None:
                 replay = {"ids": cattr[need][:, store.tape.ch].astype(np.int64), "pos": cpos[need],
@@ -310,6 +333,18 @@ def split_layout(scene: Scene, store: FaceStore, src: SourceFaces, enc: Encoded,
             "vertex_colors": vcol, "tri_lightmap_uvs": out_lm, "new_vertices": n_new,
             "source_triangle": out_src_tri, "source_face": out_face, "input_source_face": in_face,
             "replay": replay}
+
+
+def _identities(scene: Scene, src: SourceFaces, store: FaceStore, cattr: np.ndarray) -> np.ndarray:
+    """Per cut corner (its attributes ``cattr``, with the tape's corner ids): what its colour is
+    made of, as values that do not depend on the colours (:func:`split_layout`): the tape replayed
+    on fixed random values per scene vertex, on a grid of 2^-20 (corners reached along two ways
+    differ in the last bits only)."""
+    rnd = np.random.default_rng(41).random((scene.n_vertices, 2))
+    base = rnd[scene.triangles][src.kept_triangles].reshape(-1, 2)
+    vals = Tape.replay(store.tape.state(), base)
+    ids = cattr[:, store.tape.ch].astype(np.int64)
+    return np.round(vals[ids] * 2.0 ** 20)
 
 
 def apex_first(positions: np.ndarray, tris: np.ndarray, *corner_arrays: np.ndarray | None) -> tuple:
@@ -354,21 +389,19 @@ def list_bytes(name: str, values: np.ndarray, decimals: int | None = None) -> tu
 
 
 def tree_key_parts(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> list:
-    """The key of a reusable tree: everything of the scene and options the tree and the split
-    layout depend on except the colours. Positions and their grid, corners, materials (sidedness,
+    """The key of a reusable tree (:func:`grow`): everything of the scene and options the tree
+    depends on, never a lit colour. Positions and their grid, corners, materials (sidedness,
     textured or not), polygons, UVs, lightmap UVs, whether there are vertex colours, and, without
     vertex colours, the merge groups (material, sidedness, face colour and albedo, as the group
-    numbers :func:`_groups` gives: a colour change that makes two groups one, or splits one, is a
-    new key). With vertex colours the groups are left out: the groups and the vertex colours
-    decide only the coplanar merges and the re-merge's joins, which :func:`recolour` runs again
-    with the new colours and groups and compares (a lit bake's face colours are nearly all
-    different, and a new light or AO sample count regroups the few equal ones without changing a
-    merge). The per-triangle colours never reach the tree (:func:`apply_layout` takes them from
-    the scene)."""
+    numbers :func:`_groups` gives: the coplanar merge before the build reads them). With vertex
+    colours (a lit bake) nothing merges before the build (:func:`merges_before_build`) and the
+    re-merge joins only pieces of one input triangle without looking at colours
+    (:func:`remerge_groups`), so the tree is built on geometry, materials and sidedness alone and
+    every lit colour follows the triangle or piece it belongs to (:func:`complete`)."""
     two = tri_two_sided(scene)
     mats = [[bool(m.double_sided), m.texture is not None or m.texture_data is not None] for m in scene.materials]
-    return ["bsp tree 2", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__}, bool(merge),
-            bool(remerge_fragments),
+    return ["bsp tree 3", {k: getattr(opt, k) for k in BuildOptions.__dataclass_fields__},
+            merges_before_build(scene, merge), bool(remerge_fragments),
             scene.positions, scene.position_decimals, scene.triangles, scene.tri_material, mats,
             scene.tri_polygon, scene.tri_uvs, scene.tri_lightmap_uvs,
             None if scene.vertex_colors is None else list(scene.vertex_colors.shape),
@@ -384,28 +417,97 @@ def _canonical(labels: np.ndarray) -> np.ndarray:
     return rank[inv.ravel()]
 
 
-def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
-    """Build the tree and the split layout: what :func:`finish` turns into the stage's scene and
-    record, for these colours or others that give the same merge groups."""
+def _plain(v: Any) -> Any:
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def remerge_groups(scene: Scene, src: SourceFaces, two: np.ndarray, A: int, ch: int | None
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+    """What the re-merge may join, per source face, and the attribute channels that must be affine
+    over a join. With vertex colours (a lit bake) only fragments of one source face (one input
+    triangle: nothing merged before the build) join, and the colours are not looked at: a source
+    triangle's colours are affine over it and its face colour is one, so such a join shows the
+    colours it had, whatever they are, and no colour decides a join. Without vertex colours: the
+    merge groups (material, sidedness, face colour, albedo; part of the tree's key) and every
+    attribute."""
+    if scene.vertex_colors is None:
+        first_tri = src.tri_list[src.tri_start[:-1]]
+        return _groups(scene, two)[first_tri], None
+    _, at = _attributes(scene)
+    shown = np.ones(A, bool)
+    shown[at["vertex_color"]] = False
+    if ch is not None:
+        shown[ch] = False
+    return np.arange(len(src.count)), shown
+
+
+def grow(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
+    """The tree as the build and the re-merge leave it, as plain arrays (what the memo keeps;
+    :func:`complete` makes the stage's result of it for any colours): the store and tree
+    (:func:`_freeze`), the build's figures, and with vertex colours the tape of the cuts
+    (:class:`bake.bsp.split.Tape`), from which :func:`complete` computes every cut corner's colour
+    for the colours of the bake at hand."""
+    t0 = time.perf_counter()
+    center, scale = frame(scene)
+    opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
+    src, two, ch = merged(scene, opt, merge, tape=True)
+    plane, degen = face_planes(src.pos, src.count, opt.min_area)
+    first_tri = src.tri_list[src.tri_start[:-1]]
+    store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
+    if ch is not None:
+        store.tape = Tape(ch, src.n_input_corners)
+    if scene.position_decimals is not None:
+        store.grid = (center, scale, scene.position_decimals)
+    tree = build_tree(store, opt, center, scale)
+    if remerge_fragments:
+        t = time.perf_counter()
+        groups, shown = remerge_groups(scene, src, two, store.A, ch)
+        tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
+        tree.stats["remerge_seconds"] = time.perf_counter() - t
+    t_cross = time.perf_counter()
+    # parts that pass through each other: cuts no tree avoids (bake/bsp/crossing.py)
+    crossed = crossing.summary(written_positions(scene), scene.triangles, opt.epsilon * scale)
+    crossed["seconds"] = round(time.perf_counter() - t_cross, 4)
+    return {"frozen": _freeze(store, tree), "tape": None if store.tape is None else store.tape.state(),
+            "stats": {k: _plain(v) for k, v in tree.stats.items()}, "crossing": crossed,
+            "seconds": time.perf_counter() - t0}
+
+
+def _tape_of(state: dict) -> Tape:
+    tape = Tape(int(state["ch"]), int(state["n0"]))
+    tape.next = int(state["next"])
+    tape.batches = [tuple(b) for b in state["batches"]]
+    return tape
+
+
+def complete(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool, grown: dict) -> dict:
+    """The stage's result (what :func:`finish` turns into the scene and record) from a
+    :func:`grow` of a scene that differs from this one at most in its colours: the cut corners'
+    vertex colours computed again from the tape (exactly as the build computes them), the
+    encoding, the split layout and the figures. A cold bake takes the same path, so a reused tree
+    gives the cold bytes."""
     t0 = time.perf_counter()
     T_in = scene.n_triangles
-    pre: list = []
-    store, src, tree, enc, (center, scale) = build(scene, opt, merge, tape=True, remerge_fragments=remerge_fragments,
-                                                   pre_remerge=pre)
+    center, scale = frame(scene)
+    topt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
+    src, two, _ = merged(scene, topt, merge, tape=grown["tape"] is not None)
+    store, tree = _thaw(grown["frozen"])
+    tree.stats = dict(grown["stats"])
+    if grown["tape"] is not None:
+        store.tape = _tape_of(grown["tape"])
+        _, at = _attributes(scene)
+        C = scene.vertex_colors.shape[1]
+        corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, C)
+        vals = Tape.replay(grown["tape"], corners)
+        ids = store.attr[:, :, store.tape.ch].astype(np.int64)
+        store.attr[:, :, at["vertex_color"]] = vals[np.clip(ids, 0, len(vals) - 1)]
+    enc = encode(tree, fragment_triangles(store, src))
     layout = split_layout(scene, store, src, enc, center, scale)
-    recolour_state = None
-    if store.tape is not None:
-        recolour_state = {"tape": store.tape.state(), "merge": _merge_signature(src, scene)}
-        if remerge_fragments:  # the re-merge's joins depend on the vertex colours and groups (even none)
-            recolour_state["remerge"] = {"pre": pre[0], "signature": _remerge_signature(store, tree, store.tape.ch)}
     nodes_items, nodes_bytes = list_bytes(NODES_LIST, enc.nodes)
     planes_items, planes_bytes = list_bytes(PLANES_LIST, enc.planes.ravel())
     stack_bound = 2 * enc.max_depth + 2
     tol = tolerance(scene, opt)
-    t_cross = time.perf_counter()
-    # parts that pass through each other: cuts no tree avoids (bake/bsp/crossing.py)
-    crossed = crossing.summary(written_positions(scene), scene.triangles, tol * frame(scene)[1])
-    crossed["seconds"] = round(time.perf_counter() - t_cross, 4)
+    crossed = copy.deepcopy(grown["crossing"])
     T_out = len(layout["triangles"])
     st = tree.stats
     records = sum(enc.records.values())
@@ -449,20 +551,17 @@ def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool =
         if scene.position_decimals is not None:
             why += " or collapsed, flipped or tilted on the written grid"
         warnings.append(f"{st['kept_whole']} straddling fragment(s) left uncut: a piece would have been {why}")
-    return {"layout": layout, "recolour": recolour_state, "nodes": enc.nodes, "planes": enc.planes, "stack_bound": stack_bound,
+    return {"layout": layout, "nodes": enc.nodes, "planes": enc.planes, "stack_bound": stack_bound,
             "tolerance": tol, "epsilon": opt.epsilon, "counts_out": counts_out,
             "inflation": T_out / T_in - 1.0, "details": details, "warnings": warnings,
-            "seconds": time.perf_counter() - t0}
+            "seconds": float(grown["seconds"]) + time.perf_counter() - t0}
 
 
-def _merge_signature(src: SourceFaces, scene: Scene) -> str:
-    """A digest of the merged source faces apart from their vertex colours: two scenes whose
-    merges came out the same (same faces, corners and corner ids) have the same signature."""
-    _, layout = _attributes(scene)
-    chans = np.ones(src.attr.shape[2], bool)
-    if "vertex_color" in layout:
-        chans[layout["vertex_color"]] = False
-    return content_digest(src.pos, src.count, src.vid, src.tri_start, src.tri_list, src.attr[..., chans])
+
+
+def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:
+    """Build the tree and the split layout (:func:`grow`, then :func:`complete`)."""
+    return complete(scene, opt, merge, remerge_fragments, grow(scene, opt, merge, remerge_fragments))
 
 
 def _freeze(store: FaceStore, tree: Tree) -> dict:
@@ -482,64 +581,6 @@ def _thaw(frozen: dict) -> tuple[FaceStore, Tree]:
     store.grid = None if frozen["store"]["grid"] is None else tuple(frozen["store"]["grid"])
     store.tape = None
     return store, Tree(store=store, stats={}, **frozen["tree"])
-
-
-def _remerge_signature(store: FaceStore, tree: Tree, ch: int) -> str:
-    """A digest of the fragments a tree draws after the re-merge (the lists, and each fragment's
-    corners with their positions, vertex numbers and tape ids in channel ``ch``), without the
-    colours: the same joins, the same signature."""
-    n = store.n
-    ids = store.attr[:n, :, ch]
-    lists = [getattr(tree, f.name) for f in dataclasses.fields(tree) if f.name not in ("store", "stats")]
-    return content_digest(n, *lists, store.count[:n], store.vid[:n], store.src[:n], store.pos[:n], ids)
-
-
-def _remerged_again(scene: Scene, opt: BuildOptions, src: SourceFaces, two: np.ndarray, state: dict,
-                    vals: np.ndarray) -> bool:
-    """Does the re-merge, run again on the tree as it was before it with this scene's vertex
-    colours (``vals``: every tape id's colour, computed as the build computes it), join exactly
-    the fragments it joined before?"""
-    store, tree = _thaw(state["remerge"]["pre"])
-    ch = int(state["tape"]["ch"])
-    _, layout = _attributes(scene)
-    ids = store.attr[:, :, ch].astype(np.int64)
-    store.attr[:, :, layout["vertex_color"]] = vals[np.clip(ids, 0, len(vals) - 1)]
-    first_tri = src.tri_list[src.tri_start[:-1]]
-    eps = tolerance(scene, opt)
-    remerge(store, tree, _groups(scene, two)[first_tri], eps, opt.min_area, shown=np.arange(store.A) != ch)
-    return _remerge_signature(store, tree, ch) == state["remerge"]["signature"]
-
-
-def recolour(scene: Scene, opt: BuildOptions, merge: bool, made: dict) -> dict | None:
-    """``made`` (a :func:`make` for a scene that differed from this one only in its colours) for
-    this scene's vertex colours, or None when they change a decision the build made with them:
-    which coplanar faces merged (attributes must be affine over a merged face: merged again and
-    compared), which fragments the re-merge joined (run again on the tree as it was before it,
-    with these colours, and compared) or which cut corners became one vertex (a new vertex
-    is one position and colour).
-    The cut corners' colours come from the tape, computed exactly as the build computes them, so
-    the result is the bytes a build with these colours gives."""
-    state = made["recolour"]
-    layout = made["layout"]
-    if scene.vertex_colors is None or state is None:
-        return made if scene.vertex_colors is None and state is None else None
-    src, two, ch = merged(scene, dataclasses.replace(opt, epsilon=tolerance(scene, opt)), merge, tape=True)
-    if ch is None or _merge_signature(src, scene) != state["merge"]:
-        return None
-    corners = scene.vertex_colors[scene.triangles][src.kept_triangles].reshape(-1, scene.vertex_colors.shape[1])
-    rp = layout["replay"]
-    n_new = int(layout["new_vertices"])
-    vcol = scene.vertex_colors
-    vals = Tape.replay(state["tape"], corners)
-    if "remerge" in state and not _remerged_again(scene, opt, src, two, state, vals):
-        return None
-    if n_new:
-        key = np.concatenate([rp["pos"], vals[rp["ids"]]], 1)
-        uniq, inv = np.unique(key, axis=0, return_inverse=True)
-        if len(uniq) != n_new or not np.array_equal(inv.ravel(), rp["inv"]):
-            return None
-        vcol = np.concatenate([vcol, np.clip(uniq[:, 3:], 0.0, 1.0)])
-    return {**made, "layout": {**layout, "vertex_colors": vcol}}
 
 
 def finish(scene: Scene, made: dict, rec: StageRecord) -> Scene:
@@ -576,41 +617,38 @@ def stage(scene: Scene, cfg: Any) -> tuple[Scene, StageRecord]:
         rec.warn("no triangles: empty BSP")
         rec.seconds = time.perf_counter() - t0
         return new, rec
-    # A tree built for the same geometry, options and merge groups is reused (a bake whose
-    # lighting changed): bake.cache.Memo, the stage cache's store, keyed by tree_key_parts.
+    # A tree built for the same geometry, materials and options is reused (a bake whose lighting
+    # changed): bake.cache.Memo, the stage cache's store, keyed by tree_key_parts.
     memo = active_memo()
-    key = made = None
+    key = grown = None
     if memo is not None:
         key = memo.key("bsp", *tree_key_parts(scene, opt, merge, remerge_fragments))
-        made = memo.get("bsp", key, lambda m: m if _is_made(m) else None, "a BSP tree")
-        if made is not None:  # the same geometry and groups: the vertex colours may still decide
-            made = recolour(scene, opt, merge, made)
-    reused = made is not None
+        grown = memo.get("bsp", key, lambda m: m if _is_grown(m) else None, "a BSP tree")
+    reused = grown is not None
     if reused:
         memo.used("bsp")
-    if made is None:
-        made = make(scene, opt, merge, remerge_fragments)
+    else:
+        grown = grow(scene, opt, merge, remerge_fragments)
         if memo is not None:
-            memo.put("bsp", key, made)
+            memo.put("bsp", key, grown)
+    made = complete(scene, opt, merge, remerge_fragments, grown)
     new = finish(scene, made, rec)
     if memo is not None:
         for w in memo.take_warnings():
             rec.warn(w)
-    rec.details["tree_reused"] = {"reused": reused, "built_seconds": round(float(made["seconds"]), 6)}
+    rec.details["tree_reused"] = {"reused": reused, "built_seconds": round(float(grown["seconds"]), 6)}
     rec.seconds = time.perf_counter() - t0
     return new, rec
 
 
-def _is_made(made: Any) -> bool:
-    """A loaded memo holds what :func:`make` returns (the entry format checked the types inside)."""
-    keys = {"layout", "recolour", "nodes", "planes", "stack_bound", "tolerance", "epsilon", "counts_out", "inflation",
-            "details", "warnings", "seconds"}
-    return isinstance(made, dict) and keys <= set(made) and isinstance(made["layout"], dict) and \
-        isinstance(made["nodes"], np.ndarray) and isinstance(made["planes"], np.ndarray) and \
-        isinstance(made["details"], dict) and isinstance(made["warnings"], list)
+def _is_grown(grown: Any) -> bool:
+    """A loaded memo holds what :func:`grow` returns (the entry format checked the types inside)."""
+    return isinstance(grown, dict) and {"frozen", "tape", "stats", "crossing", "seconds"} <= set(grown) and \
+        isinstance(grown["frozen"], dict) and {"store", "tree"} <= set(grown["frozen"]) and \
+        isinstance(grown["stats"], dict) and (grown["tape"] is None or isinstance(grown["tape"], dict))
 
 
 _NODES_DOC = NODES_DOC
 _PLANES_DOC = "a, b, c, d per BSP plane (eye in front when a*x + b*y + c*z - d >= 0)"
 
-__all__ = ["stage", "build", "write_scene", "split_layout", "apply_layout", "make", "finish", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]
+__all__ = ["stage", "build", "write_scene", "split_layout", "apply_layout", "make", "grow", "complete", "finish", "options", "frame", "NODES_LIST", "PLANES_LIST", "Tree"]

@@ -11,8 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse import linalg as sparse_linalg
 
 from ..scene import Scene
 from .atlas import Atlas
@@ -124,6 +122,9 @@ def stitch_seams(image: np.ndarray, mask: np.ndarray, atlas: Atlas, seams: Seams
     vals = np.concatenate([wa, -wb], axis=1)
     var, inv = np.unique(cols.ravel(), return_inverse=True)
     n = len(cols)
+    from scipy import sparse  # (imported here: only a lightmap's seams need it)
+    from scipy.sparse import linalg as sparse_linalg
+
     S = sparse.csr_matrix((vals.ravel() * seam_weight, (np.repeat(np.arange(n), 8), inv)),
                           shape=(n, len(var)))
     flat = img.reshape(H * W, C)

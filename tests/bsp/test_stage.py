@@ -67,22 +67,30 @@ def _decorated(scene):
     return s.replace(face_colors=per_mat[tm], face_albedo=per_mat[1 - tm], tri_lightmap_uvs=lm), (G, C)
 
 
-def test_stage_keeps_every_triangle_area_plane_and_attribute():
+@pytest.mark.parametrize("vertex_colours", [True, False], ids=["vertex-colours", "face-colours-only"])
+def test_stage_keeps_every_triangle_area_plane_and_attribute(vertex_colours):
     scene, (G, C) = _decorated(interlocked_scene())
+    if not vertex_colours:
+        scene = scene.replace(vertex_colors=None)
+    # the pieces of each source face (an input triangle, or coplanar ones merged) add up to it
+    # (without the re-merge, which may join fragments of two source faces of one group)
+    kept, _ = stage(scene, _cfg(remerge=False))
+    tv = kept.triangle_vertices()
+    area_in = 0.5 * np.linalg.norm(np.cross(*(scene.triangle_vertices()[:, 1:] - scene.triangle_vertices()[:, :1]
+                                             ).transpose(1, 0, 2)), axis=1)
+    area_out = 0.5 * np.linalg.norm(np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]), axis=1)
+    face_out, face_in = kept.artefacts.bsp.source_face, kept.artefacts.bsp.input_source_face
+    nf = int(face_in.max()) + 1
+    np.testing.assert_allclose(np.bincount(face_out, weights=area_out, minlength=nf),
+                               np.bincount(face_in, weights=area_in, minlength=nf), rtol=1e-9, atol=1e-12)
+    assert (face_in[kept.artefacts.bsp.source_triangle] == face_out).all()
     new, rec = stage(scene, _cfg())
     new.validate()
     src = new.artefacts.bsp.source_triangle
     assert len(src) == new.n_triangles
-    area_in = 0.5 * np.linalg.norm(np.cross(*(scene.triangle_vertices()[:, 1:] - scene.triangle_vertices()[:, :1]
-                                             ).transpose(1, 0, 2)), axis=1)
     tv = new.triangle_vertices()
     area_out = 0.5 * np.linalg.norm(np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0]), axis=1)
-    # the pieces of each source face (an input triangle, or coplanar ones merged) add up to it
-    face_out, face_in = new.artefacts.bsp.source_face, new.artefacts.bsp.input_source_face
-    nf = int(face_in.max()) + 1
-    np.testing.assert_allclose(np.bincount(face_out, weights=area_out, minlength=nf),
-                               np.bincount(face_in, weights=area_in, minlength=nf), rtol=1e-9, atol=1e-12)
-    assert (face_in[src] == face_out).all()
+    np.testing.assert_allclose(area_out.sum(), area_in.sum(), rtol=1e-9)
     # every piece lies in its source triangle's plane
     s_tv = scene.triangle_vertices()[src]
     n = np.cross(s_tv[:, 1] - s_tv[:, 0], s_tv[:, 2] - s_tv[:, 0])
@@ -97,9 +105,13 @@ def test_stage_keeps_every_triangle_area_plane_and_attribute():
     assert cut.any() and (~cut).any()
     np.testing.assert_allclose(new.tri_uvs, np.einsum("tkc,ac->tka", tv, G) + 0.5, atol=1e-9)
     np.testing.assert_allclose(new.tri_lightmap_uvs, np.einsum("tkc,ac->tka", tv, -G) + 0.5, atol=1e-9)
-    np.testing.assert_allclose(new.vertex_colors, np.clip(new.positions @ C.T + 0.5, 0, 1), atol=1e-9)
+    if vertex_colours:
+        np.testing.assert_allclose(new.vertex_colors, np.clip(new.positions @ C.T + 0.5, 0, 1), atol=1e-9)
     assert rec.details["splits"] > 0 and rec.counts_out["triangles"] == new.n_triangles
-    assert rec.details["merged_triangles"] > 0  # merged polygons were cut and interpolated too
+    if vertex_colours:  # (lit colours: nothing merges before the build, so no colour decides the tree)
+        assert rec.details["merged_triangles"] == 0
+    else:
+        assert rec.details["merged_triangles"] > 0  # merged polygons were cut and interpolated too
 
 
 def test_lists_cover_every_triangle_exactly_once():

@@ -176,7 +176,7 @@ def _fit(ctx: Ctx, out: Out) -> Out:
     report_step(f"{len(F):,} triangles: fit")
     t = time.perf_counter()
     Vf, fit_info = refit(V, F, fixed, ctx.index_a, ctx.fit_points, iterations=cfg.fit_iterations,
-                         samples_b=min(cfg.error_samples, 8000), seed=cfg.seed)
+                         samples_b=min(ctx.samples, 8000), seed=cfg.seed)
     info.update(fit_info)
     fit_s = time.perf_counter() - t
     ctx.seconds["fit"] += fit_s
@@ -195,8 +195,8 @@ def measure(ctx: Ctx, out: Out) -> HausdorffResult:
     if out.h is None:
         report_step(f"{len(out.F):,} triangles: measure")
         t = time.perf_counter()
-        out.h = hausdorff(ctx.prep.V, ctx.prep.F, out.V, out.F, points=ctx.cfg.error_samples, index_a=ctx.index_a,
-                          grid_a=ctx.grid_a)
+        out.h = hausdorff(ctx.prep.V, ctx.prep.F, out.V, out.F, points=ctx.samples, index_a=ctx.index_a,
+                          grid_a=ctx.grid_a, seeds=ctx.seeds)
         ctx.measures += 1
         ctx.seconds["measure"] += time.perf_counter() - t
     return out.h
@@ -276,10 +276,10 @@ def fitted(ctx: Ctx, out: Out, o1: Out | None = None) -> tuple[Out, HausdorffRes
         # the input's side first (its grid against the small result: cheap); the other side,
         # against the input, only if that alone does not already keep the fit
         ib = SurfaceIndex(out.V, out.F)
-        hl = original_side(ib, ctx.grid_a, rounds=_FIT_CHECK_ROUNDS, straddling=False)
+        hl = original_side(ib, ctx.grid_a, seeds=ctx.seeds, rounds=_FIT_CHECK_ROUNDS, straddling=False)
         if h1.max > _FIT_TOLERANCE * hl.max:
-            hl = hausdorff(prep.V, prep.F, out.V, out.F, points=cfg.error_samples, index_a=ctx.index_a,
-                           grid_a=ctx.grid_a, index_b=ib, rounds=_FIT_CHECK_ROUNDS, straddling=False,
+            hl = hausdorff(prep.V, prep.F, out.V, out.F, points=ctx.samples, index_a=ctx.index_a,
+                           grid_a=ctx.grid_a, index_b=ib, seeds=ctx.seeds, rounds=_FIT_CHECK_ROUNDS, straddling=False,
                            a_to_b=hl)
         ctx.measures += 1
         ctx.seconds["measure"] += time.perf_counter() - t

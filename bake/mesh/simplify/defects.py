@@ -27,7 +27,7 @@ def check_flips(ctx: Ctx, V: np.ndarray, F: np.ndarray, prev: FlipResult | None 
     """The stage's flip check: only triangles not judged before (in ``prev``, else in the stage's
     last check) are measured; the result becomes the stage's last check."""
     cache = ctx.flip_cache
-    fr = flip_check(ctx.index_a, V, F, samples=min(ctx.cfg.error_samples, _FLIP_SAMPLES), scale=ctx.scale,
+    fr = flip_check(ctx.index_a, V, F, samples=min(ctx.samples, _FLIP_SAMPLES), scale=ctx.scale,
                     prev=prev if prev is not None else cache.get("last"))
     cache["last"] = fr
     cache["checked"] = cache.get("checked", 0) + fr.checked

@@ -191,16 +191,19 @@ def _details(ctx: Ctx, out: Out, h: HausdorffResult | None, checks: _Checks, par
         "edges_turned_at_sharp_angles": int(out.edge_turns),
         "fit": out.fit_info,
         "refine": refine_log,
-        "error_samples": int(cfg.error_samples) if sample is not None else 0,
+        # the grid points per side measured with: error_samples, fewer on a small input (state.samples_for)
+        "error_samples": int(ctx.samples) if sample is not None else 0,
+        "error_samples_asked": int(cfg.error_samples),
         "error_sample": sample,
         "error_bound": bound_log,
         "error_metric": "symmetric Hausdorff: a grid on each surface (every vertex, points along every edge and "
                         f"inside every triangle; on the simplified one {measure.POINTS_PER_SIMPLIFIED} per "
-                        "triangle where that is more, at most 4 x error_samples, and then every triangle cut "
+                        "triangle where that is more, at most 4 x error_samples; error_samples is what was asked "
+                        "or, when fewer, 4 per input triangle and at least 2,000), and then every triangle cut "
                         f"into at least {4 ** measure.CAPPED_MIN_LEVEL} cells), refined "
                         f"{measure.ROUNDS} times around up to "
-                        f"{measure.SEEDS} of the largest distances at separate places "
-                        f"({4 * measure.SEEDS} on the original's side), only cells that may hold more than "
+                        f"{ctx.seeds} of the largest distances at separate places "
+                        f"({4 * ctx.seeds} on the original's side), only cells that may hold more than "
                         f"{measure.KEEP_SHARE:.0%} of the largest exact distance so far (a convexity bound), "
                         "the largest made exact at their points (bake/mesh/simplify/measure.py); a sampled "
                         "maximum; fractions of the bbox diagonal",

@@ -258,7 +258,7 @@ def prove_bound(ctx: Ctx, h: HausdorffResult) -> tuple[HausdorffResult, dict | N
     # a result whose measured max is under the floor (flat faces simplified flat) gets a small
     # budget: its only open cells straddle the result's edges, where the bound is the cell's size
     # and halves per cut (a CSG-like assembly at 26% spent 320,000 points, 2.4 s, to prove 2e-4)
-    points = (_BOUND_POINTS if h.max > floor else 1) * ctx.cfg.error_samples
+    points = (_BOUND_POINTS if h.max > floor else 1) * ctx.samples
     h2 = bound_hausdorff(h, BOUND_SHARE, points, floor, both=ctx.cfg.error_bound == "both")
     log: dict = {"share": BOUND_SHARE, "floor": BOUND_FLOOR, "points_per_direction": points}
     for name, d, before in (("original_to_simplified", h2.a_to_b, h.a_to_b),

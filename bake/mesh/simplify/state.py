@@ -13,12 +13,34 @@ from ...config import SimplifyConfig
 from . import repair
 from .error import FlipResult, SurfaceIndex, edge_counts
 from .inputs import Prepared, nonmanifold_vertices, region_edge_vertices, wedges
-from .measure import HausdorffResult, surface_grid
+from .measure import SEEDS, HausdorffResult, surface_grid
 
 PHASES = ("library", "repair", "check", "fit", "measure")  # the record's *_seconds
 # The least-squares fit pairs at most this many of the input's points with the result (and a
 # third as many random points of the result with the input).
 _FIT_POINTS = 60000
+# The measure's grid on the input (and what scales with it: the simplified side's grid, the flip
+# check's points, the proven bound's budget) has at most this many points per input triangle
+# (and at least _MIN_SAMPLES): a mesh of a few hundred triangles is covered many times over by
+# error_samples = 20,000 points (Suzanne, 968 triangles: 21 per triangle); the refinement around
+# the peaks, not the grid, finds the maximum there (issue 41). Meshes of at least
+# error_samples / _SAMPLES_PER_TRIANGLE triangles (5,000 with the default) are measured as before.
+_SAMPLES_PER_TRIANGLE = 4
+_MIN_SAMPLES = 2000
+# ... and the refinement's seeds per round in proportion (measure.SEEDS at 20,000 points)
+_MIN_SEEDS = 32
+
+
+def seeds_for(samples: int) -> int:
+    """The measure's seeds per refinement round for a grid of ``samples`` points: measure.SEEDS
+    for the default 20,000 and more, in proportion below (at least _MIN_SEEDS)."""
+    return int(min(SEEDS, max(_MIN_SEEDS, round(SEEDS * samples / 20000))))
+
+
+def samples_for(n_triangles: int, error_samples: int) -> int:
+    """The grid points per side the stage measures with: ``error_samples``, or fewer on a small
+    input (_SAMPLES_PER_TRIANGLE per input triangle, at least _MIN_SAMPLES)."""
+    return int(min(error_samples, max(_MIN_SAMPLES, _SAMPLES_PER_TRIANGLE * n_triangles)))
 
 
 @dataclass
@@ -71,6 +93,8 @@ class Ctx:
     measuring: bool = False  # results are measured (measure_error, or a max_error target)
     border_log: dict = field(default_factory=dict)  # the border locks (details.border_locks)
     relax_log: list[dict] = field(default_factory=list)  # what was let go, when (details.relaxations)
+    seeds: int = SEEDS  # the measure's seeds per refinement round (seeds_for)
+    samples: int = 20000  # grid points per side of the measure (samples_for: error_samples, fewer on small inputs)
 
 
 def context(prep: Prepared, cfg: SimplifyConfig, method: str, scale: float, cap: float, measuring: bool) -> Ctx:
@@ -78,7 +102,8 @@ def context(prep: Prepared, cfg: SimplifyConfig, method: str, scale: float, cap:
     the repairs leave alone, the border and seam chains (meshopt), the input's folds and the
     points the fit pairs."""
     index_a = SurfaceIndex(prep.V, prep.F, seed=cfg.seed, scale=scale, corners=False, k=8)
-    grid_a = surface_grid(prep.V, prep.F, cfg.error_samples)
+    samples = samples_for(len(prep.F), cfg.error_samples)
+    grid_a = surface_grid(prep.V, prep.F, samples)
     # vertices the fit and the repairs leave alone: material edges, non-manifold edges and (with
     # preserve_border) open borders
     edge_mask, region_edges = region_edge_vertices(prep.F, prep.region, len(prep.V))
@@ -101,7 +126,8 @@ def context(prep: Prepared, cfg: SimplifyConfig, method: str, scale: float, cap:
               edge_mask=edge_mask, region_edges=region_edges, border_mask=border_mask, folds_in=folds_in,
               chains=chains, chain_ends=chain_ends,
               fold_zones=prep.V[prep.F[np.unique(folds_in.ravel())]].mean(axis=1) if len(folds_in) else None,
-              cap=cap, measuring=measuring)
+              cap=cap, measuring=measuring, samples=samples,
+              seeds=seeds_for(samples))
     # the fit pairs at most _FIT_POINTS of the input's grid points (a fixed, even subset)
     ctx.fit_points = grid_a.P if len(grid_a.P) <= _FIT_POINTS else \
         grid_a.P[np.sort(np.random.default_rng(cfg.seed + 3).choice(len(grid_a.P), _FIT_POINTS, replace=False))]

@@ -154,7 +154,7 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
     tex = r.lst("_tex")
     V = {n: r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy", "_toff", "_tw", "_th", "_m", "_ub",
                              "_qa", "_qb", "_qc", "_Ua", "_Ub", "_Uc", "_Va", "_Vb", "_Vc",
-                             "_qx", "_qy", "_Ux", "_Uy", "_Vx", "_Vy", "_q", "_U", "_V", "_tq", "_tU", "_tV",
+                             "_qx", "_qy", "_Ux", "_Uy", "_Vx", "_Vy", "_q", "_U", "_V",
                              "_j", "_j1", "_Y", "_xl", "_xr", "_i0", "_i1", "_X", "_rs", "_rc", "_c",
                              "_den", "_qs", "_Us", "_Vs", "_o1", "_Tx", "_Ty", "_Mx", "_My", "_Bx", "_By", "_sx",
                              "_sL", "_dL", "_sS", "_dS", "_je", "_xL", "_xS", "_ll", "_dl", "_dr", "_ts")}
@@ -163,11 +163,11 @@ def cell_fill(r: Any, spec: TextureSpec, t: Any, material: Any, flat: Any, corne
     setup: list[B.Node] = [
         r.set("_m", material),
         r.set("_toff", item(V["_m"], offs)),
-        r.set("_den", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))),
     ]
     # the textured triangle's attributes at its corners and their steps per stage unit
     tex_setup: list[B.Node] = [r.set("_tw", item(V["_m"], tws)), r.set("_th", item(V["_m"], ths)),
-                               r.set("_ub", mul(6, sub(t, 1)))]
+                               r.set("_ub", mul(6, sub(t, 1))),
+                               r.set("_den", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax))))]
     for k, (name, point) in enumerate(zip("abc", corners)):
         u = item(add(V["_ub"], 2 * k + 1), spec.uvs)
         v = item(add(V["_ub"], 2 * k + 2), spec.uvs)

@@ -87,7 +87,7 @@ def bake_all(tree: Path, only: list[str]) -> dict[str, dict[str, str]]:
                    "run", str(t), "--out", str(out), "--quiet"]
             for s in sets:
                 cmd += ["--set", s]
-            p = subprocess.run(cmd, env=env, cwd=str(REPO), capture_output=True, text=True)
+            p = subprocess.run(cmd, env=env, cwd=str(tree), capture_output=True, text=True)  # (python -c puts its cwd first on sys.path)
             if p.returncode != 0:
                 result[name] = {"exit": str(p.returncode), "stderr": p.stderr[-400:]}
             else:

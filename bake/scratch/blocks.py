@@ -434,8 +434,9 @@ class _Proc:
 class Builder:
     """Collects the scripts of one target and compiles them to its ``blocks`` dict."""
 
-    def __init__(self, scope: Scope):
+    def __init__(self, scope: Scope, *, compact: bool = False):
         self.scope = scope
+        self.compact = compact
         self._procs: dict[str, _Proc] = {}
         self._scripts: list[tuple[str, Any]] = []  # (kind, payload)
 
@@ -486,7 +487,7 @@ class Builder:
             blk["y"] = y
             y += 120 + 48 * n_body
         for bid, blk in self._blocks.items():
-            _compact(blk, leaf=bid in self._leaves)
+            _compact(blk, leaf=bid in self._leaves, bare=self.compact)
         return self._blocks
 
     def _id(self) -> str:
@@ -618,6 +619,8 @@ class Builder:
             return [1, menu]
         default = "#000000" if kind == COLOUR else ""
         if isinstance(value, Node):
+            if self.compact:  # no shadow under a reporter: [2, reporter] (see _compact)
+                return [2, self._reporter(value, parent)]
             return [3, self._reporter(value, parent), [kind, default]]
         text = _literal(value)
         if kind == COLOUR and not re.fullmatch(r"#[0-9a-fA-F]{6}", text):
@@ -635,7 +638,7 @@ class Builder:
         return self._compile(value, parent)
 
 
-def _compact(blk: dict[str, Any], *, leaf: bool = False) -> None:
+def _compact(blk: dict[str, Any], *, leaf: bool = False, bare: bool = False) -> None:
     """Leave out the members whose absence means the same to the loaders: ``shadow`` and
     ``topLevel`` when false, ``inputs`` and ``fields`` when empty, and ``next: null`` of a
     ``leaf`` (a reporter, boolean or shadow block: nothing ever follows one). scratch-parser's
@@ -645,9 +648,18 @@ def _compact(blk: dict[str, Any], *, leaf: bool = False) -> None:
     read only when a stack is walked (``getNextBlock``, the compiler's ``walkStack``, ``blockToXML``
     tests it for truth), which never reaches a reporter. ``parent`` stays, ``null`` included: the
     VM compares it with ``null`` (``getTopLevelScript``), and so does ``next`` of a stack block
-    (``deleteBlock``)."""
+    (``deleteBlock``).
+
+    ``bare`` (the compact blocks of packed projects, issue 41) also leaves out ``parent`` of a
+    leaf: the runtime never reads a reporter's parent (``getTopLevelScript``, the editor's glow,
+    walks up from stack blocks only, whose parents stay; the editor's moves take the old parent
+    from its own event), and a reporter in a number or text input goes without the shadow under
+    it (``[2, reporter]``, as Scratch writes a boolean input): both loaders read it as an input
+    whose block is the reporter; the editor shows an empty slot if it is dragged out."""
     if leaf and blk.get("next", 0) is None:
         del blk["next"]
+    if bare and leaf and blk.get("parent") is not None:
+        del blk["parent"]
     for key in ("shadow", "topLevel"):
         if blk.get(key) is False:
             del blk[key]

@@ -103,8 +103,15 @@ class Costume:
     asset: Asset
     bitmap_resolution: int = 1
     rotation_center: tuple[float, float] = (0.0, 0.0)
+    # only what the loaders need (a lighter project, issue 41): the name, the asset and its
+    # format. scratch-parser requires no more; scratch-vm and TurboWarp derive md5ext from the
+    # asset id and format, take a bitmap resolution of 1, and centre an SVG without a rotation
+    # centre on its view box (the alphabet's costumes are empty and never shown)
+    minimal: bool = False
 
     def to_json(self) -> dict[str, Any]:
+        if self.minimal:
+            return {"name": self.name, "assetId": self.asset.md5, "dataFormat": self.asset.ext}
         return {"name": self.name, "bitmapResolution": self.bitmap_resolution, "dataFormat": self.asset.ext,
                 "assetId": self.asset.md5, "md5ext": self.asset.md5ext,
                 "rotationCenterX": self.rotation_center[0], "rotationCenterY": self.rotation_center[1]}

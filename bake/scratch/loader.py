@@ -57,17 +57,14 @@ class LoaderSpec:
 
 def add_loader(r: Any, spec: LoaderSpec) -> None:
     """Define the loader's custom blocks on a reader under construction
-    (:class:`bake.scratch.readers.ReaderBuilder`: ``v``, ``lst``, ``set``, ``change``, ``define``).
-
-    Few blocks, as they are bytes of project.json too (issue 41): one varint reader with a single
-    loop, the zigzag value computed with arithmetic, one row loop for every column mode (a
-    comparison is 1 or 0 in arithmetic) and the checks that bound a loop before it runs."""
+    (:class:`bake.scratch.readers.ReaderBuilder`: ``v``, ``lst``, ``set``, ``change``, ``define``)."""
     S, p, s, a, n = r.v("_pkS", ""), r.v("_pkp"), r.v("_pks"), r.v("_pka"), r.v("_pkn")
-    T, C, U, h, m, c = r.v("_pkT"), r.v("_pkC"), r.v("_pkU"), r.v("_pkh"), r.v("_pkm"), r.v("_pkc")
+    T, C, h, m, c = r.v("_pkT"), r.v("_pkC"), r.v("_pkh"), r.v("_pkm"), r.v("_pkc")
     z, mode, k, w = r.v("_pkz"), r.v("_pkmode"), r.v("_pkk"), r.v("_pkw")
     q0, sc, acc = r.v("_pkq0"), r.v("_pksc"), r.v("_pkacc")
     rows, stride, L, i, gT = r.v("_pkR"), r.v("_pkSt"), r.v("_pkL"), r.v("_pki"), r.v("_pkgT")
     base = r.v("_pkb")
+    r.v("_pkns")
     err = r.v("_pk error", "")
     r.v(ERROR_VAR, "")
     r.v(DONE_VAR, 0)
@@ -83,53 +80,67 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         r.set("_pks", item(B.costume_number(), sym)),
         r.change("_pkp", 1),
     ]
-    # the varint at _pkp with parameter _pkT (_pkC = 92 - T, _pkU = T - 1) into _pkn
+    # the varint at _pkp with parameter _pkT (_pkC = 92 - _pkT) into _pkn
     r.define("_pk read", [], [
         *read,
-        r.set("_pka", 0),
-        B.repeat_until(lt(s, T), [r.set("_pka", sub(add(mul(a, C), s), U)), *read]),
-        r.set("_pkn", add(mul(a, T), s)),
+        B.if_(lt(s, T), [r.set("_pkn", s)], [
+            r.set("_pka", 0),
+            B.repeat_until(lt(s, T), [
+                r.set("_pka", add(add(mul(a, C), sub(s, T)), 1)),
+                *read,
+            ]),
+            r.set("_pkn", add(mul(a, T), s)),
+        ]),
     ])
-    # zigzag: n/2 when n is even, -(n + 1)/2 when odd (exact: halves of integers below 2^53)
-    unzig = sub(div(n, 2), mul(mod(n, 2), add(n, 0.5)))
-    # a header varint (T = 46) into _pkn, its zigzag value into _pkz
-    r.define("_pk num", [], [r.set("_pkT", HEADER_T), r.set("_pkC", BASE - HEADER_T), r.set("_pkU", HEADER_T - 1),
-                             B.call("_pk read"), r.set("_pkz", unzig)])
+    # a header varint (T = 46)
+    r.define("_pk num", [], [r.set("_pkT", HEADER_T), r.set("_pkC", BASE - HEADER_T), B.call("_pk read")])
     num, rd = B.call("_pk num"), B.call("_pk read")
+    # the zigzag value of _pkn into _pkz
+    r.define("_pk unzig", [], [
+        B.if_(eq(mod(n, 2), 0), [r.set("_pkz", div(n, 2))], [r.set("_pkz", sub(0, div(add(n, 1), 2)))])])
+    unzig = B.call("_pk unzig")
 
-    def fail(cond: B.Boolean, msg: str) -> B.Node:
-        return B.if_(cond, [r.set("_pk error", msg), B.stop("this script")])
+    def fail(msg: str) -> list[B.Node]:
+        return [r.set("_pk error", msg), B.stop("this script")]
 
+    code = [rd, r.change("_pkh", n)]
     group = [
         # header: mode, width, T, decimals, zigzag q0, palette size, palette
-        num, r.set("_pkmode", n), num, r.set("_pkw", n), num, r.set("_pkgT", n),
-        num, r.set("_pksc", B.mathop("10 ^", n)), num, r.set("_pkq0", z), num,
-        fail(or_(or_(lt(gT, 1), lt(w, 1)), gt(n, L)), "bad group header"),
-        B.delete_all(pal),
-        B.repeat(n, [num, B.add_to(pal, z)]),
-        # the group's T for _pk read
-        r.set("_pkT", gT), r.set("_pkC", sub(BASE, gT)), r.set("_pkU", sub(gT, 1)),
-        r.set("_pkc", add(base, k)), r.set("_pkacc", 0), r.set("_pkn", 0),
-        B.repeat(rows, [
-            B.repeat(w, [
-                B.if_(gt(mode, 0), [rd, r.change("_pkh", n)]),
-                B.if_(eq(mode, 3), [  # index: a new one (code 0) is m + 1, else m + 1 - code
-                    r.change("_pkm", eq(n, 0)), r.set("_pkacc", sub(sub(add(m, 1), n), eq(n, 0))),
-                ], [B.if_(eq(mode, 4), [r.set("_pkacc", item(add(n, 1), pal))], [  # palette
-                    # const (0): q0; offset (1): q0 + code; delta (2): the last + q0 + unzigzag(code)
-                    r.set("_pkacc", add(add(add(mul(acc, eq(mode, 2)), q0), mul(n, eq(mode, 1))),
-                                        mul(unzig, eq(mode, 2)))),
-                ])]),
-                B.replace_item(out, c, div(acc, sc)),
-                r.change("_pkc", 1),
+        num, r.set("_pkmode", n), num, r.set("_pkw", n),
+        num, r.set("_pkgT", n),
+        num, r.set("_pksc", B.mathop("10 ^", n)),
+        num, unzig, r.set("_pkq0", z),
+        B.delete_all(pal), num,
+        B.if_(or_(or_(lt(gT, 1), lt(w, 1)), gt(n, L)), fail("bad group header")),
+        B.repeat(n, [num, unzig, B.add_to(pal, div(z, sc))]),
+        r.set("_pkT", gT), r.set("_pkC", sub(BASE, gT)),  # the group's T for _pk read
+        r.set("_pkc", add(base, k)), r.set("_pkacc", 0), r.set("_pkz", 0),
+        B.if_(eq(mode, 3), [  # index: w columns, row by row
+            B.repeat(rows, [
+                B.repeat(w, [
+                    *code,
+                    B.if_(eq(n, 0), [r.change("_pkm", 1), B.replace_item(out, c, m)],
+                          [B.replace_item(out, c, sub(add(m, 1), n))]),
+                    r.change("_pkc", 1),
+                ]),
+                r.change("_pkc", sub(stride, w)),
             ]),
-            r.change("_pkc", sub(stride, w)),
-        ]),
+        ], [B.if_(eq(mode, 4), [  # palette
+            B.repeat(rows, [*code, B.replace_item(out, c, item(add(n, 1), pal)), r.change("_pkc", stride)]),
+        ], [  # const (0): q0; offset (1): q0 + code; delta (2): the last + q0 + unzigzag(code)
+            B.repeat(rows, [
+                B.if_(gt(mode, 0), [*code, B.if_(eq(mode, 2), [unzig], [r.set("_pkz", n)])]),
+                B.if_(lt(mode, 2), [r.set("_pkacc", 0)]),
+                r.change("_pkacc", add(q0, z)),
+                B.replace_item(out, c, div(acc, sc)),
+                r.change("_pkc", stride),
+            ]),
+        ])]),
         r.change("_pkk", w),
     ]
     section = [
         num, r.set("_pkR", n), num, r.set("_pkSt", n),
-        fail(or_(lt(stride, 1), gt(add(base, mul(rows, stride)), add(mul(L, 10), 1000000))), "bad size"),
+        B.if_(or_(lt(stride, 1), gt(add(base, mul(rows, stride)), add(mul(L, 10), 1000000))), fail("bad size")),
         B.repeat(mul(rows, stride), [B.add_to(out, 0)]),
         r.set("_pkk", 1),
         B.repeat_until(gt(k, stride), group),
@@ -143,14 +154,13 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         r.set("_pkp", len(MAGIC) + 1),
         num,  # the CRC (for bake check; not checked here)
         num, r.change("_pkp", n),  # the name
+        num, r.set("_pkns", n),  # (no bound needed: each section reads symbols or fails)
         r.set("_pkh", 0), r.set("_pkm", 0), r.set("_pkb", 0),
+        B.repeat(var("_pkns"), section),
         num,
-        fail(gt(n, 8), "bad section count"),
-        B.repeat(n, section),
-        num,
-        fail(or_(not_eq(n, h), not_eq(p, add(L, 1))), "the text is truncated or was edited"),
-        fail(lt(B.list_length(out), base),
-             "more items than vanilla Scratch's `add to list` allows (200,000; TurboWarp has no limit)"),
+        B.if_(or_(not_eq(n, h), not_eq(p, add(L, 1))), fail("the text is truncated or was edited")),
+        B.if_(lt(B.list_length(out), base),
+              fail("more items than vanilla Scratch's `add to list` allows (200,000; TurboWarp has no limit)")),
     ])
     # every packed text into its list (an empty item leaves its list alone)
     copy: list[B.Node] = []
@@ -158,14 +168,14 @@ def add_loader(r: Any, spec: LoaderSpec) -> None:
         copy.append(B.if_(eq(i, j), [B.delete_all(name), B.repeat(B.list_length(out), [
             r.change("_pkk", 1), B.add_to(name, item(k, out))])]))
     r.define("unpack lists", [], [
-        r.set(ERROR_VAR, ""), r.set(DONE_VAR, 0), r.set("_pki", 0),
+        r.set(ERROR_VAR, ""), r.set(DONE_VAR, 0), r.set("_pki", 1),
         B.repeat(B.list_length(packed), [
-            r.change("_pki", 1),
             B.if_(not_eq(item(i, packed), ""), [
                 B.call("_pk unpack %s", item(i, packed)),
-                r.set("_pkk", 0),
-                B.if_(eq(err, ""), copy, [r.set(ERROR_VAR, B.join(item(i, names), B.join(": ", err)))]),
+                B.if_(eq(err, ""), [r.set("_pkk", 0), *copy],
+                      [r.set(ERROR_VAR, B.join(item(i, names), B.join(": ", err)))]),
             ]),
+            r.change("_pki", 1),
         ]),
         B.delete_all(out), B.delete_all(pal), r.set(DONE_VAR, 1),
     ])
@@ -200,16 +210,14 @@ def lists_read(spec: LoaderSpec) -> list[str]:
 
 
 # --------------------------------------------------------------------------- cost
-def _varints(n: int, cont: int) -> int:
-    """``_pk read`` n times (call and definition included) with ``cont`` continuation symbols in
-    all: 21 blocks for a one-symbol varint and 20 more per continuation symbol."""
-    return 21 * n + 20 * cont
+def _varints(n: int, slow: int, cont: int) -> int:
+    """``_pk read`` n times (call and definition included), ``slow`` of them with continuation
+    symbols, ``cont`` continuation symbols in all: 16 blocks for a one-symbol varint, 25 + 21 per
+    continuation symbol otherwise."""
+    return 16 * n + 9 * slow + 21 * cont
 
 
 UNPACK_LISTS_FIXED = 10  # ``unpack lists`` itself: its call, the first and last sets, the loop's end
-# blocks per item of a column group, by mode, besides reading its code: the mode tests, the value,
-# the write and the column step (const, offset, delta, index, palette)
-_CELL = {"const": 39, "offset": 41, "delta": 41, "index": 25, "palette": 21}
 
 
 def decode_cost(cost: DecodeCost, n_lists: int = 1) -> int:
@@ -218,15 +226,30 @@ def decode_cost(cost: DecodeCost, n_lists: int = 1) -> int:
     ``n_lists`` packed lists): the call of ``_pk unpack``, the decoding and the copy into the
     list. The whole ``unpack lists`` is the sum over the lists + :data:`UNPACK_LISTS_FIXED`."""
     N = cost.items
-    # header varints: ``_pk num`` (the call, T, C, U and the zigzag value) around ``_pk read``
-    total = 14 * cost.header_varints + _varints(cost.header_varints, cost.header_continuation)
-    total += _varints(cost.body_varints, cost.body_continuation)
-    # _pk unpack's fixed part and, in unpack lists, the item test, the call, the dispatch, the copy
-    total += 53 + 2 * len(cost.sections) + 3 * n_lists + 6 * N
+    total = 4 * cost.header_varints + _varints(cost.header_varints, cost.header_slow, cost.header_continuation)
+    total += _varints(cost.body_varints, cost.body_slow, cost.body_continuation)
+    total += 9 * cost.header_zigzag + 2 * cost.header_negative  # _pk unzig in the header
+    total += 37 + 2 * len(cost.sections)  # _pk unpack's fixed part
     for rows, stride in cost.sections:  # a section's header, presizing _pk out, its group loop
         total += 30 + 5 * rows * stride
-    for mode, w, new, P, R in cost.groups:  # the group header, its palette, the row loops
-        total += 46 + 4 * P + 2 * R + R * (2 * w + 6) + R * w * _CELL[mode]
+    total += 4 * len(cost.groups)
+    total += 15 + 3 * n_lists + 6 * N  # in unpack lists: the item test, the dispatch, the copy
+    for mode, w, new, P, R in cost.groups:
+        total += 38 + 2 * (P + 1) + 4 * P
+        if mode == "index":
+            codes = R * w
+            total += 2 * (R + 1) + R * (2 * (w + 1) + 4) + 6 * codes + 4 * new + 6 * (codes - new)
+            continue
+        total += 3
+        if mode == "palette":
+            total += 2 * (R + 1) + 9 * R
+        elif mode == "const":
+            total += 2 * (R + 1) + 18 * R
+        elif mode == "offset":
+            total += 2 * (R + 1) + 25 * R
+        else:  # delta, with _pk unzig per row
+            total += 2 * (R + 1) + 22 * R + 9 * R
+    total += 2 * cost.body_negative
     return total
 
 

@@ -40,7 +40,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Sequence, Union
 
-from .sb3 import stable_id
+from .sb3 import ID_ALPHABET, stable_id
 
 # shadow kinds (compressed primitive codes)
 NUM, POS, WHOLE, INT, ANGLE, COLOUR, TEXT = 4, 5, 6, 7, 8, 9, 10
@@ -467,6 +467,7 @@ class Builder:
         self._blocks: dict[str, dict[str, Any]] = {}
         self._leaves: set[str] = set()  # reporters and shadows: never followed by a next block
         self._n = 0
+        self._ids = 0  # the next counter id (compact)
         # block ids must not collide with the target's variable/list ids either
         self._reserved = set(self.scope.variables.values()) | set(self.scope.lists.values())
         y = 0
@@ -494,12 +495,29 @@ class Builder:
         # 3 characters (Scratch's own are 20; 86^3 = 636,056 of them): ids appear 2-4 times per
         # block in project.json; unique within the target (checked), which is all Scratch needs
         self._n += 1
+        if self.compact:  # the shortest ids: the block's number in base 86 (1 character, then 2 ...)
+            return self._counter_id()
         bid = stable_id(self.scope.target, "block", str(self._n), length=BLOCK_ID_LENGTH)
         salt = 0
         while bid in self._blocks or bid in self._reserved:
             salt += 1
             bid = stable_id(self.scope.target, "block", str(self._n), str(salt), length=BLOCK_ID_LENGTH)
         return bid
+
+    def _counter_id(self) -> str:
+        while True:
+            n, digits = self._ids, []
+            self._ids += 1
+            base = len(ID_ALPHABET)
+            while True:  # bijective base 86: "!" .. "9", then "!!" ..
+                n, r = divmod(n, base)
+                digits.append(ID_ALPHABET[r])
+                if n == 0:
+                    break
+                n -= 1
+            bid = "".join(reversed(digits))
+            if bid not in self._blocks and bid not in self._reserved:
+                return bid
 
     def _new(self, opcode: str, parent: str | None, *, shadow: bool = False) -> str:
         bid = self._id()

@@ -675,7 +675,8 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         if k in all_local:
             raise B.BlockError(f"list {k!r} is used by the reader itself")
         all_local[k] = v
-    var_ids, list_ids = sb3.data_ids(name, list(r.vars), list(all_local), length=VAR_ID_LENGTH)
+    var_ids, list_ids = sb3.data_ids(name, list(r.vars), list(all_local), length=VAR_ID_LENGTH,
+                                     taken=list(stage_ids.values()))
     scope = B.Scope(name, variables=var_ids, lists=list_ids, stage_lists=stage_ids)
     b = B.Builder(scope, compact=r.compact)
     for proccode, args, body in r.procs:

@@ -64,12 +64,13 @@ def stable_id(*parts: str, length: int = 20) -> str:
     return "".join(out)
 
 
-def data_ids(target: str, variables: Sequence[str], lists: Sequence[str], *, length: int = 20
-             ) -> tuple[dict[str, str], dict[str, str]]:
+def data_ids(target: str, variables: Sequence[str], lists: Sequence[str], *, length: int = 20,
+             taken: Sequence[str] = ()) -> tuple[dict[str, str], dict[str, str]]:
     """The ids of a target's variables and lists, derived from the names (:func:`stable_id`) and
     unique within the target: Scratch keeps variables and lists in one table keyed by id, so a
-    short id that collides with one already given is derived again with a salt."""
-    taken: set[str] = set()
+    short id that collides with one already given is derived again with a salt. ``taken``: ids
+    of another target to keep clear of too (a sprite's lookup falls back to the stage's ids)."""
+    taken = set(taken)
 
     def one(kind: str, name: str) -> str:
         vid, salt = stable_id(target, kind, name, length=length), 0

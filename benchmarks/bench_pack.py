@@ -430,6 +430,29 @@ def main() -> None:
                     print(f"{r.id} {r.mode}: {', '.join(f'{s:.3f}' for s in secs)} s, lossless {lossless} "
                           f"(load {load()})", flush=True)
 
+    # the split of project.json, one row per bake (docs/formats.md's table): plain, the baseline's
+    # packed and this tree's packed for the bunnies, this tree's packed for the others
+    rows = {}
+    for key, m in result["models"].items():
+        for kind, split, tw in (("plain", m["split"]["plain"], None),
+                                ("baseline", result.get("baseline", {}).get("models", {}).get(key, {}).get("split"),
+                                 result.get("baseline", {}).get("models", {}).get(key, {}).get("turbowarp")),
+                                ("packed", m["split"]["packed"], m.get("turbowarp"))):
+            if split is None or (kind == "plain" and key not in result.get("baseline", {}).get("models", {})):
+                continue
+            label = {"plain": f"{m['label']}: plain", "packed": f"{m['label']}: packed",
+                     "baseline": f"{m['label']}: packed at {result['baseline']['commit']} (before)"
+                     if kind == "baseline" else ""}[kind]
+            rows[f"{key} {kind}"] = {"label": label, "triangles": m["triangles"], **split["per_tri"],
+                                     "bytes": split["bytes"]["total"],
+                                     "blocks_per_tri": round(split["per_tri"]["loader_blocks"]
+                                                             + split["per_tri"]["reader_blocks"], 3),
+                                     "costumes_variables_other_per_tri": round(
+                                         split["per_tri"]["costumes"] + split["per_tri"]["variables"]
+                                         + split["per_tri"]["other"], 3),
+                                     "compiled_s": (tw or {}).get("compiled", {}).get("median")}
+    result["split_rows"] = rows
+
     # ideas one at a time (bytes), on the 2k and 69k bunnies
     for key in ("bunny2k", "bunny69k_bsp"):
         if key not in baked:

@@ -629,6 +629,8 @@ class Builder:
                 raise BlockError(f"a boolean input needs a boolean block, not {value!r}")
             return [2, self._compile(value, parent)]
         if kind == COSTUME_MENU:
+            if isinstance(value, Node) and self.compact:  # the reporter alone, no menu under it
+                return [2, self._reporter(value, parent)]
             menu = self._new("looks_costume", parent, shadow=True)
             if isinstance(value, Node):
                 self._blocks[menu]["fields"]["COSTUME"] = ["", None]

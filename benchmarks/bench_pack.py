@@ -443,7 +443,7 @@ def main() -> None:
             label = {"plain": f"{m['label']}: plain", "packed": f"{m['label']}: packed",
                      "baseline": f"{m['label']}: packed at {result['baseline']['commit']} (before)"
                      if kind == "baseline" else ""}[kind]
-            rows[f"{key} {kind}"] = {"label": label, "triangles": m["triangles"], **split["per_tri"],
+            rows[f"{key} {kind}"] = {"bake": label, "triangles": m["triangles"], **split["per_tri"],
                                      "bytes": split["bytes"]["total"],
                                      "blocks_per_tri": round(split["per_tri"]["loader_blocks"]
                                                              + split["per_tri"]["reader_blocks"], 3),

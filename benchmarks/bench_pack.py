@@ -18,6 +18,12 @@ cumulative (each row adds one idea) and leave-one-out (the full packing without 
 Format changes that cost accuracy: ``export.precision`` (positions; the rounding bound) and
 ``bsp.plane_decimals`` (planes; the split inflation), packed bytes for each value.
 
+The whole project.json, split (issue 41): the lists (the stage's, packed texts included), the
+loader's blocks, the reader's blocks, the costumes, the sprite's variables and own lists, and the
+rest, per written triangle; ``--baseline TREE`` also bakes the 2k and 69k bunnies packed with
+another checkout (e.g. main) for the same split and times its 69k decode in the same TurboWarp
+run, so before and after come from one run.
+
 Writes ``benchmarks/results/pack.json``; docs/formats.md's tables are rendered from it.
 """
 
@@ -92,6 +98,83 @@ def bake(cfg, out_dir: Path):
 
 def per_tri(n_bytes: int, tris: int) -> float:
     return round(n_bytes / max(1, tris), 3)
+
+
+def _json_len(x) -> int:
+    return len(json.dumps(x, ensure_ascii=False, separators=(",", ":"), allow_nan=False).encode("utf-8"))
+
+
+def _is_loader(proccode: str) -> bool:
+    return proccode.startswith("_pk ") or proccode in ("unpack lists", "clear unpacked lists")
+
+
+def project_split(sb3_path: Path, tris: int) -> dict:
+    """Bytes of project.json by what they hold, and per written triangle: ``lists`` (the stage's
+    lists: the data, packed texts included), ``loader_blocks`` (the scripts of the loader's custom
+    blocks), ``reader_blocks`` (every other block), ``costumes`` (every target's), ``variables`` (the
+    targets' variables and the sprites' own lists: the loader's and the reader's working lists) and
+    ``other`` (the rest: the JSON around them, comments, meta)."""
+    project = sb3.load_project(sb3_path)[0]
+    total = _json_len(project)
+    out = {"lists": 0, "loader_blocks": 0, "reader_blocks": 0, "costumes": 0, "variables": 0}
+    for t in project["targets"]:
+        out["costumes"] += _json_len(t.get("costumes", []))
+        out["variables"] += _json_len(t.get("variables", {}))
+        out["lists" if t.get("isStage") else "variables"] += _json_len(t.get("lists", {}))
+        blocks = t.get("blocks", {})
+        owner: dict[str, str] = {}
+
+        def walk(bid, top):
+            stack = [bid]
+            while stack:
+                b = stack.pop()
+                if not isinstance(b, str) or b not in blocks or b in owner:
+                    continue
+                owner[b] = top
+                blk = blocks[b]
+                if not isinstance(blk, dict):
+                    continue
+                stack.append(blk.get("next"))
+                for v in (blk.get("inputs") or {}).values():
+                    stack.extend(x for x in v[1:] if isinstance(x, str))
+        for bid, blk in blocks.items():
+            if isinstance(blk, dict) and blk.get("topLevel"):
+                name = ""
+                if blk.get("opcode") == "procedures_definition":
+                    proto = blocks.get(blk["inputs"]["custom_block"][1], {})
+                    name = proto.get("mutation", {}).get("proccode", "")
+                walk(bid, "loader" if _is_loader(name) else "reader")
+        for bid, blk in blocks.items():
+            n = _json_len({bid: blk}) - 2 + 1  # the member and its comma
+            out["loader_blocks" if owner.get(bid) == "loader" else "reader_blocks"] += n
+    out["other"] = total - sum(out.values())
+    out["total"] = total
+    return {"bytes": out, "per_tri": {k: per_tri(v, tris) for k, v in out.items()}, "written_triangles": tris}
+
+
+BASELINE_SCRIPT = """
+import json, sys, pickle
+from pathlib import Path
+from bake import pipeline
+cfg = pickle.loads(Path(sys.argv[1]).read_bytes())
+res = pipeline.run(cfg)
+files = res.scene.artefacts.outputs
+name = next(n for n in files if n.endswith(".sb3"))
+Path(sys.argv[2]).write_bytes(files[name])
+"""
+
+
+def bake_with_tree(tree: Path, cfg, out: Path) -> Path:
+    """The .sb3 another checkout bakes from this config (pickled across), at ``out``."""
+    import pickle
+
+    cfg_file = out.with_suffix(".cfg.pickle")
+    cfg_file.write_bytes(pickle.dumps(cfg))
+    r = subprocess.run([sys.executable, "-c", BASELINE_SCRIPT, str(cfg_file), str(out)], cwd=str(tree),
+                       env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True, timeout=3600)
+    if r.returncode != 0:
+        raise SystemExit(f"baseline bake with {tree} failed: {r.stderr[-2000:]}")
+    return out
 
 
 # --------------------------------------------------------------------------- ideas
@@ -208,6 +291,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="the small models only (no 69k bunny)")
     ap.add_argument("--no-turbowarp", action="store_true", help="skip the TurboWarp timings")
     ap.add_argument("--no-vm", action="store_true", help="skip the scratch-vm runs")
+    ap.add_argument("--baseline", type=Path, help="another checkout (e.g. ../main): its packed 2k and 69k "
+                    "bunnies, split and timed in the same run")
     args = ap.parse_args()
     if not BUNNY.exists():
         raise SystemExit(f"needs the corpus: {BUNNY} not found (set BAKE_CORPUS)")
@@ -273,9 +358,27 @@ def main() -> None:
             "lossless_python": all(v.get("lossless_python", True) for v in lists.values()),
             "bake_seconds": {"plain": round(plain["seconds"], 3), "packed": round(packed["seconds"], 3)},
             "export_seconds": {"plain": round(plain["export"].seconds, 3), "packed": round(packed["export"].seconds, 3)},
+            "split": {"plain": project_split(plain["path"], T), "packed": project_split(packed["path"], T)},
         }
         print(f"{key}: {T} triangles, lists {per_tri(old_total, T)} -> {per_tri(plain_total, T)} -> "
               f"{per_tri(packed_total, T)} B/tri; project.json {packed['pj']:,}", flush=True)
+
+    # the same packed bakes with another checkout: the split, and below its 69k decode time
+    baseline = {}
+    if args.baseline:
+        for key in ("bunny2k", "bunny69k"):
+            if key in baked:
+                cfg = with_export(models(args.quick)[key]["config"], pack=True, pack_max_items=0)
+                f = bake_with_tree(args.baseline.resolve(), cfg, tmp / key / "baseline.sb3")
+                baseline[key] = f
+                T = result["models"][key]["triangles"]
+                result.setdefault("baseline", {"tree": str(args.baseline), "models": {}})
+                commit = subprocess.run(["git", "-C", str(args.baseline), "rev-parse", "--short", "HEAD"],
+                                        capture_output=True, text=True).stdout.strip()
+                result["baseline"]["commit"] = commit
+                result["baseline"]["models"][key] = {"split": project_split(f, T)}
+                print(f"{key} baseline ({commit}): project.json {result['baseline']['models'][key]['split']['bytes']['total']:,}",
+                      flush=True)
 
     # scratch-vm: the loader's blocks and the rebuilt lists (not the 69k BSP bunny: ~2 minutes of VM)
     if not args.no_vm:
@@ -311,7 +414,8 @@ def main() -> None:
             result["lookups"] = lookup_costs()
             print(f"character lookups, ns: {result['lookups']}", flush=True)
             for k in keys:  # one model at a time: every list is read back and compared
-                run = turbowarp.run([(k, baked[k][2]["path"])], modes=("compiled", "interpreted"), repeat=3,
+                pair = [(k, baked[k][2]["path"])] + ([(f"{k}@baseline", baseline[k])] if k in baseline else [])
+                run = turbowarp.run(pair, modes=("compiled", "interpreted"), repeat=3,
                                     action={"call": {"target": "Mesh", "proccode": "unpack lists", "args": []}},
                                     read={"target": "Stage", "lists": list(baked[k][1]["lists"]), "variables": []},
                                     timeout_ms=900_000)
@@ -319,11 +423,35 @@ def main() -> None:
                 for r in run.results:
                     secs = [x["stepSeconds"] for x in r.runs]
                     lossless = all(same_items(r.lists.get(n, []), items) for n, items in baked[k][1]["lists"].items())
-                    result["models"][r.id].setdefault("turbowarp", {})[r.mode] = {
+                    where = result["models"][r.id] if "@" not in r.id else result["baseline"]["models"][k]
+                    where.setdefault("turbowarp", {})[r.mode] = {
                         "seconds": [round(s, 4) for s in secs], "median": round(float(np.median(secs)), 4),
                         "min": round(min(secs), 4), "errors": r.errors[:3], "lossless": lossless, "load": load()}
                     print(f"{r.id} {r.mode}: {', '.join(f'{s:.3f}' for s in secs)} s, lossless {lossless} "
                           f"(load {load()})", flush=True)
+
+    # the split of project.json, one row per bake (docs/formats.md's table): plain, the baseline's
+    # packed and this tree's packed for the bunnies, this tree's packed for the others
+    rows = {}
+    for key, m in result["models"].items():
+        for kind, split, tw in (("plain", m["split"]["plain"], None),
+                                ("baseline", result.get("baseline", {}).get("models", {}).get(key, {}).get("split"),
+                                 result.get("baseline", {}).get("models", {}).get(key, {}).get("turbowarp")),
+                                ("packed", m["split"]["packed"], m.get("turbowarp"))):
+            if split is None or (kind == "plain" and key not in result.get("baseline", {}).get("models", {})):
+                continue
+            label = {"plain": f"{m['label']}: plain", "packed": f"{m['label']}: packed",
+                     "baseline": f"{m['label']}: packed at {result['baseline']['commit']} (before)"
+                     if kind == "baseline" else ""}[kind]
+            rows[f"{key} {kind}"] = {"bake": label, "triangles": m["triangles"], **split["per_tri"],
+                                     "bytes": split["bytes"]["total"],
+                                     "blocks_per_tri": round(split["per_tri"]["loader_blocks"]
+                                                             + split["per_tri"]["reader_blocks"], 3),
+                                     "costumes_variables_other_per_tri": round(
+                                         split["per_tri"]["costumes"] + split["per_tri"]["variables"]
+                                         + split["per_tri"]["other"], 3),
+                                     "compiled_s": (tw or {}).get("compiled", {}).get("median")}
+    result["split_rows"] = rows
 
     # ideas one at a time (bytes), on the 2k and 69k bunnies
     for key in ("bunny2k", "bunny69k_bsp"):

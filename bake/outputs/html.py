@@ -113,7 +113,7 @@ def _sb3_costumes(out_dir: Path, report: dict, files: dict[str, bytes] | None = 
             continue
         for target in project.get("targets", []):
             for c in target.get("costumes", []):
-                data = entries.get(c.get("md5ext", ""))
+                data = entries.get(c.get("md5ext") or f"{c.get('assetId')}.{c.get('dataFormat')}")
                 if data is not None and c.get("name") not in out:
                     out[c["name"]] = data
         break

@@ -113,7 +113,7 @@ def from_project(project: dict, assets: dict[str, bytes]) -> tuple[int, int, int
     if not costumes:
         return WHITE
     c = costumes[min(int(stage.get("currentCostume", 0) or 0), len(costumes) - 1)]
-    data = assets.get(c.get("md5ext", ""), b"")
+    data = assets.get(c.get("md5ext") or f"{c.get('assetId')}.{c.get('dataFormat')}", b"")
     m = re.fullmatch(rb'<svg [^>]*><rect width="480" height="360" fill="#([0-9a-f]{6})"/></svg>', data)
     if not m:
         return WHITE

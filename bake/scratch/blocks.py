@@ -40,7 +40,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Sequence, Union
 
-from .sb3 import stable_id
+from .sb3 import ID_ALPHABET, stable_id
 
 # shadow kinds (compressed primitive codes)
 NUM, POS, WHOLE, INT, ANGLE, COLOUR, TEXT = 4, 5, 6, 7, 8, 9, 10
@@ -434,8 +434,9 @@ class _Proc:
 class Builder:
     """Collects the scripts of one target and compiles them to its ``blocks`` dict."""
 
-    def __init__(self, scope: Scope):
+    def __init__(self, scope: Scope, *, compact: bool = False):
         self.scope = scope
+        self.compact = compact
         self._procs: dict[str, _Proc] = {}
         self._scripts: list[tuple[str, Any]] = []  # (kind, payload)
 
@@ -466,6 +467,7 @@ class Builder:
         self._blocks: dict[str, dict[str, Any]] = {}
         self._leaves: set[str] = set()  # reporters and shadows: never followed by a next block
         self._n = 0
+        self._ids = 0  # the next counter id (compact)
         # block ids must not collide with the target's variable/list ids either
         self._reserved = set(self.scope.variables.values()) | set(self.scope.lists.values())
         y = 0
@@ -486,19 +488,36 @@ class Builder:
             blk["y"] = y
             y += 120 + 48 * n_body
         for bid, blk in self._blocks.items():
-            _compact(blk, leaf=bid in self._leaves)
+            _compact(blk, leaf=bid in self._leaves, bare=self.compact)
         return self._blocks
 
     def _id(self) -> str:
         # 3 characters (Scratch's own are 20; 86^3 = 636,056 of them): ids appear 2-4 times per
         # block in project.json; unique within the target (checked), which is all Scratch needs
         self._n += 1
+        if self.compact:  # the shortest ids: the block's number in base 86 (1 character, then 2 ...)
+            return self._counter_id()
         bid = stable_id(self.scope.target, "block", str(self._n), length=BLOCK_ID_LENGTH)
         salt = 0
         while bid in self._blocks or bid in self._reserved:
             salt += 1
             bid = stable_id(self.scope.target, "block", str(self._n), str(salt), length=BLOCK_ID_LENGTH)
         return bid
+
+    def _counter_id(self) -> str:
+        while True:
+            n, digits = self._ids, []
+            self._ids += 1
+            base = len(ID_ALPHABET)
+            while True:  # bijective base 86: "!" .. "9", then "!!" ..
+                n, r = divmod(n, base)
+                digits.append(ID_ALPHABET[r])
+                if n == 0:
+                    break
+                n -= 1
+            bid = "".join(reversed(digits))
+            if bid not in self._blocks and bid not in self._reserved:
+                return bid
 
     def _new(self, opcode: str, parent: str | None, *, shadow: bool = False) -> str:
         bid = self._id()
@@ -610,6 +629,8 @@ class Builder:
                 raise BlockError(f"a boolean input needs a boolean block, not {value!r}")
             return [2, self._compile(value, parent)]
         if kind == COSTUME_MENU:
+            if isinstance(value, Node) and self.compact:  # the reporter alone, no menu under it
+                return [2, self._reporter(value, parent)]
             menu = self._new("looks_costume", parent, shadow=True)
             if isinstance(value, Node):
                 self._blocks[menu]["fields"]["COSTUME"] = ["", None]
@@ -618,6 +639,8 @@ class Builder:
             return [1, menu]
         default = "#000000" if kind == COLOUR else ""
         if isinstance(value, Node):
+            if self.compact:  # no shadow under a reporter: [2, reporter] (see _compact)
+                return [2, self._reporter(value, parent)]
             return [3, self._reporter(value, parent), [kind, default]]
         text = _literal(value)
         if kind == COLOUR and not re.fullmatch(r"#[0-9a-fA-F]{6}", text):
@@ -635,7 +658,7 @@ class Builder:
         return self._compile(value, parent)
 
 
-def _compact(blk: dict[str, Any], *, leaf: bool = False) -> None:
+def _compact(blk: dict[str, Any], *, leaf: bool = False, bare: bool = False) -> None:
     """Leave out the members whose absence means the same to the loaders: ``shadow`` and
     ``topLevel`` when false, ``inputs`` and ``fields`` when empty, and ``next: null`` of a
     ``leaf`` (a reporter, boolean or shadow block: nothing ever follows one). scratch-parser's
@@ -645,9 +668,18 @@ def _compact(blk: dict[str, Any], *, leaf: bool = False) -> None:
     read only when a stack is walked (``getNextBlock``, the compiler's ``walkStack``, ``blockToXML``
     tests it for truth), which never reaches a reporter. ``parent`` stays, ``null`` included: the
     VM compares it with ``null`` (``getTopLevelScript``), and so does ``next`` of a stack block
-    (``deleteBlock``)."""
+    (``deleteBlock``).
+
+    ``bare`` (the compact blocks of packed projects, issue 41) also leaves out ``parent`` of a
+    leaf: the runtime never reads a reporter's parent (``getTopLevelScript``, the editor's glow,
+    walks up from stack blocks only, whose parents stay; the editor's moves take the old parent
+    from its own event), and a reporter in a number or text input goes without the shadow under
+    it (``[2, reporter]``, as Scratch writes a boolean input): both loaders read it as an input
+    whose block is the reporter; the editor shows an empty slot if it is dragged out."""
     if leaf and blk.get("next", 0) is None:
         del blk["next"]
+    if bare and leaf and blk.get("parent") is not None:
+        del blk["parent"]
     for key in ("shadow", "topLevel"):
         if blk.get(key) is False:
             del blk[key]

@@ -278,11 +278,14 @@ def project_outputs(scene: Any, cfg: Any, values: dict[str, list], name: str,
     costumes = texture_costumes(scene)
     if cfg.sb3:
         sb3_name = _cfg(cfg, "sb3_name", "") or f"{name}.sb3"
+        # a packed project is the lighter one (issue 41): the stage's list ids as short as the sprite's
+        id_length = readers.VAR_ID_LENGTH if packed else 20
+        stage_ids = sb3.data_ids("Stage", [], list(stored), length=id_length)[1]
         if spec is not None:
-            sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=list(stored), demo=True)
+            sprite = readers.reader_target(spec, cfg.sprite_name, stage_lists=stage_ids, demo=True)
         else:
             sprite = sb3.Target(cfg.sprite_name, layer_order=1)
-        stage = sb3.Target("Stage", is_stage=True, lists=stored)
+        stage = sb3.Target("Stage", is_stage=True, lists=stored, id_length=id_length)
         if spec is not None and spec.mesh is not None:  # the reader draws the mesh: a backdrop it shows on
             m, book = spec.mesh, book_lists(cfg, values)
             bd = backdrop.choose(book["vertices"], book["triangles"],

@@ -17,12 +17,12 @@ _OUT, _HDR, _PX, _ALPHA, _TABLE, _VOL = "ti colors", "_ti header", "_ti px", "_t
 EMPTY_SVG = sb3.SPRITE_SVG
 
 
-def alphabet_costumes() -> list[sb3.Costume]:
+def alphabet_costumes(minimal: bool = False) -> list[sb3.Costume]:
     """One costume per TextImage character ("!" .. "~", costume #1 .. #94): ``switch costume to
     (letter)`` matches names case-sensitively (scratch.md 4a), so a character's costume number is
     its value + 1."""
     asset = sb3.Asset(EMPTY_SVG, "svg")
-    return [sb3.Costume(ch, asset, 1, (1.0, 1.0)) for ch in ALPHABET]
+    return [sb3.Costume(ch, asset, 1, (1.0, 1.0), minimal=minimal) for ch in ALPHABET]
 
 
 def textimage_part(r) -> None:

@@ -328,6 +328,9 @@ class ReaderBuilder:
         self.flag: list[B.Node] = []
         self.flag_guard: B.Boolean | None = None  # the green flag renders only when this holds
         self.alphabet = False  # a part reads characters through the 94 alphabet costumes
+        # the lighter encoding of packed projects (issue 41): minimal alphabet costumes and
+        # compact blocks (:class:`bake.scratch.blocks.Builder` ``compact``)
+        self.compact = False
 
     def v(self, name: str, init: Any = 0) -> B.VarRef:
         self.vars.setdefault(name, init)
@@ -672,9 +675,10 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
         if k in all_local:
             raise B.BlockError(f"list {k!r} is used by the reader itself")
         all_local[k] = v
-    var_ids, list_ids = sb3.data_ids(name, list(r.vars), list(all_local), length=VAR_ID_LENGTH)
+    var_ids, list_ids = sb3.data_ids(name, list(r.vars), list(all_local), length=VAR_ID_LENGTH,
+                                     taken=list(stage_ids.values()))
     scope = B.Scope(name, variables=var_ids, lists=list_ids, stage_lists=stage_ids)
-    b = B.Builder(scope)
+    b = B.Builder(scope, compact=r.compact)
     for proccode, args, body in r.procs:
         b.define(proccode, args, body)
     if demo:
@@ -689,7 +693,7 @@ def reader_target(spec: ReaderSpec, name: str = "Reader", *, local_lists: dict[s
             b.when_flag(script)
     # the alphabet first (costume k + 1 is character k: the decoders read costume numbers), the
     # pen's fence costume after it
-    costumes = alphabet_costumes() if r.alphabet else []
+    costumes = alphabet_costumes(minimal=r.compact) if r.alphabet else []
     if spec.mesh and spec.renderer:
         costumes.append(sb3.Costume("fence", sb3.Asset(FENCE_SVG, "svg"), 1, (FENCE / 2, FENCE / 2)))
     return sb3.Target(name, lists=all_local, variables=dict(r.vars), costumes=costumes,

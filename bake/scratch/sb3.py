@@ -64,12 +64,13 @@ def stable_id(*parts: str, length: int = 20) -> str:
     return "".join(out)
 
 
-def data_ids(target: str, variables: Sequence[str], lists: Sequence[str], *, length: int = 20
-             ) -> tuple[dict[str, str], dict[str, str]]:
+def data_ids(target: str, variables: Sequence[str], lists: Sequence[str], *, length: int = 20,
+             taken: Sequence[str] = ()) -> tuple[dict[str, str], dict[str, str]]:
     """The ids of a target's variables and lists, derived from the names (:func:`stable_id`) and
     unique within the target: Scratch keeps variables and lists in one table keyed by id, so a
-    short id that collides with one already given is derived again with a salt."""
-    taken: set[str] = set()
+    short id that collides with one already given is derived again with a salt. ``taken``: ids
+    of another target to keep clear of too (a sprite's lookup falls back to the stage's ids)."""
+    taken = set(taken)
 
     def one(kind: str, name: str) -> str:
         vid, salt = stable_id(target, kind, name, length=length), 0
@@ -103,8 +104,15 @@ class Costume:
     asset: Asset
     bitmap_resolution: int = 1
     rotation_center: tuple[float, float] = (0.0, 0.0)
+    # only what the loaders need (a lighter project, issue 41): the name, the asset and its
+    # format. scratch-parser requires no more; scratch-vm and TurboWarp derive md5ext from the
+    # asset id and format, take a bitmap resolution of 1, and centre an SVG without a rotation
+    # centre on its view box (the alphabet's costumes are empty and never shown)
+    minimal: bool = False
 
     def to_json(self) -> dict[str, Any]:
+        if self.minimal:
+            return {"name": self.name, "assetId": self.asset.md5, "dataFormat": self.asset.ext}
         return {"name": self.name, "bitmapResolution": self.bitmap_resolution, "dataFormat": self.asset.ext,
                 "assetId": self.asset.md5, "md5ext": self.asset.md5ext,
                 "rotationCenterX": self.rotation_center[0], "rotationCenterY": self.rotation_center[1]}

@@ -13,9 +13,9 @@ from bake.scratch import blocks as B
 from vm_harness import call, vm  # noqa: F401  (vm is a fixture)
 
 
-def _project(builder_fn, *, variables=(), lists=(), stage_lists=None, costumes=None):
+def _project(builder_fn, *, variables=(), lists=(), stage_lists=None, costumes=None, compact=False):
     scope = B.Scope("S", variables=list(variables), lists=list(lists), stage_lists=list(stage_lists or {}))
-    b = B.Builder(scope)
+    b = B.Builder(scope, compact=compact)
     builder_fn(b)
     blocks = b.build()
     target = sb3.Target("S", variables={v: 0 for v in variables}, lists={n: [] for n in lists},
@@ -109,7 +109,83 @@ def test_block_ids_are_short_unique_and_avoid_variable_ids():
 
 
 # --------------------------------------------------------------------------- meaning, in the VM
-def _semantics_project(tmp_path):
+def _compacted(blocks: dict) -> dict:
+    """What the compact encoding (packed projects, issue 41) should make of plainly built blocks,
+    worked out from them: the n-th block's id is the n-th counter id ("!", "#", ... in
+    sb3.ID_ALPHABET order, then two characters), a leaf (a block without ``next``: reporters and
+    shadows) has no ``parent``, and a reporter in an input has no shadow under it (neither a
+    literal nor a menu block)."""
+    alphabet = sb3.ID_ALPHABET
+    names = [c for c in alphabet] + [a + b for a in alphabet for b in alphabet]
+    menus = {inp[2] for b in blocks.values() for inp in b.get("inputs", {}).values()
+             if inp[0] == 3 and isinstance(inp[2], str)}
+    new = dict(zip([bid for bid in blocks if bid not in menus], names))
+    out = {}
+    for bid, b in blocks.items():
+        if bid in menus:
+            continue
+        b = json.loads(json.dumps(b))
+        if "next" not in b:
+            b.pop("parent", None)
+        for key in ("next", "parent"):
+            if b.get(key) is not None:
+                b[key] = new[b[key]]
+        for name, inp in b.get("inputs", {}).items():
+            if inp[0] == 3:
+                inp = [2, inp[1]]
+            b["inputs"][name] = [new[x] if isinstance(x, str) else x for x in inp]
+        out[new[bid]] = b
+    return out
+
+
+def test_compact_blocks_are_the_plain_blocks_lighter():
+    """The compact encoding changes only what the runtime never reads: the ids (shortest counter
+    ids), a leaf's parent and the shadow under a reporter; the scripts are the same."""
+    build, variables, lists, costumes = _semantics_build()
+    plain, _, _ = _project(build, variables=variables, lists=lists, costumes=costumes)
+    compact, _, target = _project(build, variables=variables, lists=lists, costumes=costumes, compact=True)
+    _check_links(plain)
+    assert compact == _compacted(plain)
+    assert len(sb3.dumps(compact)) < len(sb3.dumps(plain))
+    assert not set(compact) & set(target.to_json()["variables"])
+
+
+def test_vm_runs_compact_blocks_as_built(tmp_path, vm):
+    p = _semantics_project(tmp_path, compact=True)
+    res = vm({"load": str(p), "runs": [call("S", "main %s %s", 5, 2.5, lists=["out"])]})
+    assert res["validation"] == [{"file": str(p), "ok": True, "projectVersion": 3}]
+    got = [math.inf if g is None else g for g in res["runs"][0]["lists"]["out"]]
+    assert got == EXPECTED
+
+
+def test_data_ids_keep_clear_of_taken_ids():
+    var_ids, list_ids = sb3.data_ids("S", ["a", "b"], ["c"], length=4)
+    taken = [var_ids["b"], list_ids["c"]]
+    v2, l2 = sb3.data_ids("S", ["a", "b"], ["c"], length=4, taken=taken)
+    assert v2["a"] == var_ids["a"]  # only the ids that collide are derived again
+    assert not set(v2.values()) & set(taken) and not set(l2.values()) & set(taken)
+    assert len(set(v2.values()) | set(l2.values())) == 3
+
+
+def test_minimal_costume_is_what_scratch_parser_requires():
+    asset = sb3.Asset(sb3.SPRITE_SVG, "svg")
+    c = sb3.Costume("A", asset, 1, (1.0, 1.0), minimal=True).to_json()
+    assert c == {"name": "A", "assetId": asset.md5, "dataFormat": "svg"}
+    full = sb3.Costume("A", asset, 1, (1.0, 1.0)).to_json()
+    assert full["md5ext"] == f"{asset.md5}.svg" and full["rotationCenterX"] == 1.0
+
+
+def _semantics_project(tmp_path, compact=False):
+    build, variables, lists, costumes = _semantics_build()
+    blocks, stage, target = _project(build, variables=variables, lists=lists, costumes=costumes, compact=compact)
+    target.lists["words"] = ["alpha", "beta"]
+    data, _ = sb3.write_sb3([stage, target])
+    p = tmp_path / "semantics.sb3"
+    p.write_bytes(data)
+    return p
+
+
+def _semantics_build():
     """A sprite whose custom block exercises operators, lists, control flow, arguments, nested and
     recursive calls, costumes and the pen. Expected values are worked out by hand below."""
     names = ["Alpha", "alpha", "7", "b"]
@@ -154,12 +230,7 @@ def _semantics_project(tmp_path):
             B.goto_xy(0, 0), B.pen_down(), B.goto_xy(10, -5), B.pen_up(), B.goto_xy(50, 50),
         ])
 
-    blocks, stage, target = _project(build, variables=["i", "acc"], lists=["out", "words"], costumes=costumes)
-    target.lists["words"] = ["alpha", "beta"]
-    data, _ = sb3.write_sb3([stage, target])
-    p = tmp_path / "semantics.sb3"
-    p.write_bytes(data)
-    return p
+    return build, ["i", "acc"], ["out", "words"], costumes
 
 
 EXPECTED = [7.5, "52.5", 2, 3, -2, -1, 0.5, math.inf, "é", 5, "eq-ci", "numeric", 1, 2, 3, 4, 6, 720, 2, "B",

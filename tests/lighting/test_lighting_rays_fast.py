@@ -72,3 +72,25 @@ def test_embree_frame_origins_through_strided_views_match_the_default_call():
     assert np.array_equal(got, ref)
     with pytest.raises(TypeError):
         tr.occluded(o_soa.T.astype(np.float64), d_soa.T, 1.5, embree_frame=True)
+
+
+def test_face_geometry_gives_np_cross_and_norm_bits():
+    from bake.lighting.targets import face_geometry
+
+    rng = np.random.default_rng(11)
+    V = rng.normal(size=(3000, 3)) * 10.0 ** rng.integers(-8, 8, size=(3000, 1))
+    F = rng.integers(0, 3000, size=(9000, 3))
+    F[:40, 1] = F[:40, 0]  # degenerate: two corners the same
+    F[40:50] = F[40:50, :1]  # a point
+    p = V[F]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    cr = np.cross(e1, e2)
+    ln = np.linalg.norm(cr, axis=1)
+    n_ref = np.divide(cr, ln[:, None], out=np.zeros_like(cr), where=ln[:, None] > 0)
+    longest_ref = np.stack([np.linalg.norm(e1, axis=1), np.linalg.norm(p[:, 2] - p[:, 1], axis=1),
+                            np.linalg.norm(e2, axis=1)], axis=1).max(axis=1)
+    n, area, longest = face_geometry(V, F)
+    assert n.tobytes() == n_ref.tobytes()
+    assert area.tobytes() == (0.5 * ln).tobytes()
+    assert longest.tobytes() == longest_ref.tobytes()
+    assert not n[:50].any() and not area[:50].any()

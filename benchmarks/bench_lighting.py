@@ -203,8 +203,19 @@ def compare_to_embree(sc, V, F, samples: int, threads: int, repeats: int) -> tup
         "ratio_cpu_with_embree_build": round(med["cpu"] / (emed["cpu"] + build.cpu), 3),
         "ratio_wall_without_build": round((med["wall"] - med["build_seconds"]) / emed["wall"], 3),
         "load_1min": [p["load_1min"] for p in pairs],
-        "runs": pairs,
     }
+    # where the stage's wall time beyond Embree's goes (medians; generation and reduction run on the
+    # threads beside the tracing, so their share of the wall is their thread-seconds / threads)
+    over = med["wall"] - emed["wall"]
+    split = {"scene_build": med["build_seconds"],
+             "serial_other": med["outside_threads_seconds"] - med["build_seconds"],
+             "generate": med["thread_generate_cpu"] / threads,
+             "shade": med["thread_shade_cpu"] / threads}
+    split["rest"] = over - sum(split.values())  # thread hand-off, tail of the last chunks, noise
+    res["overhead_wall"] = {"seconds": round(over, 4),
+                            **{k: round(v, 4) for k, v in split.items()},
+                            "of_embree_wall": {k: round(v / emed["wall"], 4) for k, v in split.items()}}
+    res["runs"] = pairs
     return res, out_ao
 
 

@@ -38,13 +38,12 @@ def ambient_occlusion(ctx: Context, pts: Points, samples: int, distance: float, 
 
     def work(i0: int, i1: int, clock) -> None:
         with clock("generate"):
-            o, d = hemi.rays(i0, i1)
+            o, d = hemi.embree_rays(i0, i1)
         with clock("trace"):
-            occ = ctx.tracer.occluded(o, d, distance)
+            occ = ctx.tracer.occluded(o, d, distance, embree_frame=True)
         with clock("shade"):
-            f = occ.reshape(i1 - i0, N).astype(np.float32)
-            m, s = mean_and_se(f, 1.0)
-            out[i0:i1] = 1.0 - m
+            m, s = mean_and_se(occ.reshape(i1 - i0, N), 1.0)  # (booleans: counted)
+            np.subtract(1.0, m, out=out[i0:i1])
             se[i0:i1] = s
 
     drive(ctx, stats, P, N, work)

@@ -3,6 +3,7 @@ threaded driver over sample points."""
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -10,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from .rays import Clock, Timers, Tracer, points_per_chunk
-from .sampling import cosine_directions, frames, multi_jittered, point_shifts
+from .sampling import RayBuffers, cosine_directions, cosine_rays_into, frames, multi_jittered, point_shifts
 
 # stream salts: each effect draws from its own random stream
 SALT_AO = 1
@@ -145,22 +146,37 @@ class Hemisphere:
     b32: np.ndarray
     su32: np.ndarray
     org: np.ndarray
+    org_embree: np.ndarray  # ``org`` in Embree's frame (Tracer.embree_origins)
+    _local: threading.local = field(default_factory=threading.local, repr=False)
 
     @property
     def N(self) -> int:
         return self.pattern.n
 
     def rays(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray]:
-        """(origins, directions) float32, ``N`` rays per point, point-major."""
+        """(origins, directions) float32, ``N`` rays per point, point-major, contiguous."""
         d, _ = cosine_directions(self.pattern, self.n32[i0:i1], self.t32[i0:i1], self.b32[i0:i1],
                                  self.su32[i0:i1])
         return np.repeat(self.org[i0:i1], self.N, axis=0), d
+
+    def embree_rays(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The same rays as :meth:`rays` (bit for bit), origins in Embree's frame, for
+        ``Tracer.occluded(..., embree_frame=True)``: ``(n, 3)`` float32 views of this thread's
+        reused buffers, valid until this thread's next call (so the caller traces and reduces
+        them before asking for the next chunk)."""
+        n_rays = (i1 - i0) * self.N
+        buf = getattr(self._local, "buf", None)
+        if buf is None or not buf.fits(n_rays, self.N):
+            buf = self._local.buf = RayBuffers(max(n_rays, points_per_chunk(self.N) * self.N), self.N)
+        return cosine_rays_into(self.pattern, self.n32[i0:i1], self.t32[i0:i1], self.b32[i0:i1],
+                                self.su32[i0:i1], self.org_embree[i0:i1], buf)
 
 
 def hemisphere(ctx: "Context", pts, samples: int, salt: int) -> Hemisphere:
     pattern = multi_jittered(samples, ctx.seed, salt)
     su, sv = point_shifts(pts.key, ctx.seed, salt)
     t, b = frames(pts.nrm, sv)
-    return Hemisphere(pattern, as32(pts.nrm), as32(t), as32(b), su.astype(np.float32),
-                      ctx.tracer.origins(pts.pos, pts.nrm))
+    org = ctx.tracer.origins(pts.pos, pts.nrm)
+    return Hemisphere(pattern, as32(pts.nrm), as32(t), as32(b), su.astype(np.float32), org,
+                      ctx.tracer.embree_origins(org))
 

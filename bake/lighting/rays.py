@@ -74,8 +74,12 @@ class Tracer:
 
         pos = np.asarray(positions, dtype=np.float64)
         tris = np.asarray(triangles, dtype=np.int64)
-        used = np.unique(tris.ravel()) if len(tris) else np.arange(len(pos))
-        p = pos[used] if len(used) else np.zeros((1, 3))
+        if len(tris):  # the vertices the triangles use (a mask: np.unique would sort or hash)
+            used = np.zeros(len(pos), bool)
+            used[tris.ravel()] = True
+            p = pos[used]
+        else:
+            p = pos if len(pos) else np.zeros((1, 3))
         lo, hi = p.min(axis=0), p.max(axis=0)
         self.center = 0.5 * (lo + hi)
         d = float(np.linalg.norm(hi - lo))
@@ -115,8 +119,16 @@ class Tracer:
             self.rays += n
 
     # ---------------------------------------------------------------- queries
-    def occluded(self, o: np.ndarray, d: np.ndarray, dist: float | np.ndarray | None = None) -> np.ndarray:
-        """True where the segment ``o + t d``, ``0 <= t <= dist``, hits a triangle."""
+    def embree_origins(self, o_local: np.ndarray) -> np.ndarray:
+        """Local float32 origins in Embree's frame (times ``k``: exact), for ``occluded(...,
+        embree_frame=True)``: scaling once per sample point instead of once per ray."""
+        return np.asarray(o_local, np.float32) * self._k32
+
+    def occluded(self, o: np.ndarray, d: np.ndarray, dist: float | np.ndarray | None = None, *,
+                 embree_frame: bool = False) -> np.ndarray:
+        """True where the segment ``o + t d``, ``0 <= t <= dist``, hits a triangle. With
+        ``embree_frame``, ``o`` is already in Embree's frame (:meth:`embree_origins`) and both
+        arrays are float32 ``(n, 3)`` of any strides (embreex reads them in place: no copy)."""
         n = len(o)
         if n == 0 or self.n_triangles == 0:
             return np.zeros(n, dtype=bool)
@@ -125,8 +137,13 @@ class Tracer:
             dist = np.ascontiguousarray(dist, dtype=np.float32) * self._k32
         elif dist is not None:
             dist = float(dist) * self.k
-        r = self._scene.run(np.ascontiguousarray(o, np.float32) * self._k32, np.ascontiguousarray(d, np.float32),
-                            dists=dist, query="OCCLUDED")
+        if embree_frame:
+            if o.dtype != np.float32 or d.dtype != np.float32:
+                raise TypeError("occluded(embree_frame=True) takes float32 origins and directions")
+            r = self._scene.run(o, d, dists=dist, query="OCCLUDED")
+        else:
+            r = self._scene.run(np.ascontiguousarray(o, np.float32) * self._k32,
+                                np.ascontiguousarray(d, np.float32), dists=dist, query="OCCLUDED")
         return np.asarray(r) == 0
 
     def intersect(self, o: np.ndarray, d: np.ndarray, dist: float | np.ndarray | None = None) -> dict:

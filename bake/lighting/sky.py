@@ -31,9 +31,9 @@ def sky_light(ctx: Context, pts: Points, samples: int, zenith: np.ndarray, horiz
     def work(i0: int, i1: int, clock) -> None:
         n = i1 - i0
         with clock("generate"):
-            o, d = hemi.rays(i0, i1)
+            o, d = hemi.embree_rays(i0, i1)
         with clock("trace"):
-            occ = ctx.tracer.occluded(o, d, far)
+            occ = ctx.tracer.occluded(o, d, far, embree_frame=True)
         with clock("shade"):
             vis = (~occ).reshape(n, N).astype(np.float32)
             dy = d[:, 1].reshape(n, N)

@@ -527,21 +527,28 @@ def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     colour = [r.set("_c", _colour(r, t, material)),
               B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
     # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
-    # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
+    # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring); one and two lines (most
+    # triangles) without the loop: the same points, the same arithmetic
     dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
-    fill = [
-        *colour,
-        r.set("_dx", sub(cx(), bx)), r.set("_dy", sub(cy(), by)),
-        r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
+    one = [B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))), B.pen_down(), B.goto_xy(ax, ay)]
+    two = [r.set("_x", add(bx, div(dx, 4))), r.set("_y", add(by, div(dy, 4))),
+           B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay), B.goto_xy(add(x, div(dx, 2)), add(y, div(dy, 2)))]
+    many = [
         r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
         r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
-        B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),  # k = 1 (a needle): that one line
-        # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up: none for k = 1 or 2), then
-        # with k - 1 odd the last point, from a
+        B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),
+        # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd the
+        # last point, from a
         B.repeat(div(sub(n, 2), 2), [
             r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
             r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
         B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
+    ]
+    fill = [
+        *colour,
+        r.set("_dx", sub(cx(), bx)), r.set("_dy", sub(cy(), by)),
+        r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
+        B.if_(gt(n, 2), many, [B.if_(gt(n, 1), two, one)]),
         B.pen_up(),
     ]
     if check_usable:
@@ -645,7 +652,7 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     ranges, stack = r.lst("draw ranges"), r.lst("_bsp stack")
     for n, val in (("cam x", r.spec.camera.x), ("cam y", r.spec.camera.y), ("cam z", r.spec.camera.z)):
         r.v(n, val)
-    rr, T, bb, fr, nr, g, nx = (r.v(x) for x in ("_r", "_T", "_B", "_front", "_near", "_g", "_next"))
+    rr, T, bb = (r.v(x) for x in ("_r", "_T", "_B"))
 
     def at(k):  # item (r + k) of nodes
         return item(add(rr, k), nodes)
@@ -664,15 +671,24 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     def emit(first, n):  # a range into draw ranges
         return [B.add_to(ranges, item(first, nodes)), B.add_to(ranges, item(n, nodes))]
 
+    # a split record: B (item r + 1) says which children there are: the front child is the
+    # record at r + 6 unless B < 0, the back child at |B| unless B = 0. The near side is pushed
+    # (drawn last), then the coplanar range on the eye's side (its first at item g - 1, its count
+    # at g), and the far side is visited at once (or the stack popped when there is none).
+    def side(near_push, g, far):
+        return [*near_push,
+                B.if_(gt(at(g), 0), [B.add_to(stack, sub(1 - g, rr))]),
+                *far]
+
     split = [
         r.set("_B", at(1)),
-        B.if_(lt(bb, 0), [r.set("_front", 0), r.set("_B", sub(0, bb))], [r.set("_front", add(rr, 6))]),
-        # g: the item of the coplanar range's count on the eye's side (its first is item g - 1)
-        B.if_(behind, [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 5))],
-              [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 3))]),
-        B.if_(gt(nr, 0), [B.add_to(stack, nr)]),  # the near side is drawn last
-        B.if_(gt(item(g, nodes), 0), [B.add_to(stack, sub(1, g))]),  # then the coplanar range
-        B.if_(gt(nx, 0), [r.set("_r", nx)], pop()),  # the far side first, at once
+        B.if_(behind,
+              # eye behind: the back child near, the front child far, the range at r + 4
+              side([B.if_(not_(eq(bb, 0)), [B.add_to(stack, B.abs_(bb))])], 5,
+                   [B.if_(lt(bb, 0), pop(), [r.set("_r", add(rr, 6))])]),
+              # eye in front (or on the plane): the front child near, the back child far, the range at r + 2
+              side([B.if_(not_(lt(bb, 0)), [B.add_to(stack, add(rr, 6))])], 3,
+                   [B.if_(eq(bb, 0), pop(), [r.set("_r", B.abs_(bb))])])),
     ]
     r.define("bsp walk", [], [
         B.delete_all(ranges), B.delete_all(stack), B.add_to(stack, 0),
@@ -683,7 +699,7 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
                 r.set("_T", item(rr, nodes)),
                 B.if_(lt(T, 2), [  # a leaf or a peel: its (first) range now
                     *emit(add(rr, 1), add(rr, 2)),
-                    B.if_(eq(T, 1), [B.add_to(stack, sub(0, add(rr, 3))), r.set("_r", add(rr, 5))], pop()),
+                    B.if_(eq(T, 1), [B.add_to(stack, sub(-3, rr)), r.set("_r", add(rr, 5))], pop()),
                 ], split),
             ], [*emit(sub(0, rr), sub(1, rr)), *pop()]),  # r < 0: the ready-made range at item -r
         ]),

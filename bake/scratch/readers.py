@@ -69,15 +69,18 @@ the stage are simply not seen). A frame is *safe* when the model's bounding sphe
 numbers) is in front of ``near`` and its picture within those 4000 pixels; only an unsafe frame
 tests each vertex (an unusable one's screen x in ``_px`` becomes 1e9, and a triangle whose corners'
 ``|x|`` sum to more than 3 x 4000 is not drawn). The pen's colour is set only when it changes
-(``_pc``: the last colour set this frame). The filler draws a fan of ``k = ceiling(L)`` lines from the
-first corner ``a`` to the middles ``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c``
-(``L`` its length), walked ``q1, a, q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines.
-No point of the triangle is farther than half a pixel from a line (a point on the way from ``a``
-to a point ``x`` of ``b-c``, a fraction ``s`` along, is within ``s |x - q|`` of the line to the
-nearest ``q``, and ``|x - q| <= L / 2k <= 1/2``), so with pen size 2 everything within half a
-pixel of the triangle is painted and no line leaves it: no outline is needed. The BSP stage puts
-each triangle's corner opposite its shortest edge first (``bake.bsp.stage.apex_first``), so ``L``
-is short and the fan has few lines (one for a needle, ``L <= 1``).
+(``_pc``: the last colour set this frame). With pen size ``w`` (``ReaderSpec.pen_size``, 2.5) the
+filler draws a fan of ``k = ceiling(L / (w - 1))`` lines from the first corner ``a`` to the middles
+``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c`` (``L`` its length), walked ``q1, a,
+q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines. No point of the triangle is farther
+than ``(w - 1) / 2`` from a line (a point on the way from ``a`` to a point ``x`` of ``b-c``, a
+fraction ``s`` along, is within ``s |x - q|`` of the line to the nearest ``q``, and ``|x - q| <= L /
+2k <= (w - 1) / 2``), so the pen, ``w / 2`` wide on each side, paints everything within half a
+pixel of the triangle, and no line leaves it: no outline is needed. (Pen size 2 needs a line per
+pixel of ``L``, 2.5 one per 1.5 pixels; the wider pen reaches a quarter of a pixel farther out of
+the triangle, which the player suite's agreement with the preview bounds.) The BSP stage puts each triangle's corner opposite its shortest edge first
+(``bake.bsp.stage.apex_first``), so ``L`` is short and the fan has few lines (one for a needle,
+``L <= w - 1``); one and two lines are drawn without the loop.
 
 What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
 ``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.
@@ -189,7 +192,7 @@ class ReaderSpec:
     two_sided: list[int] = field(default_factory=list)
     bounds: tuple[tuple[float, float, float], float] | None = None
     helpers: bool = False
-    pen_size: float = 2.0
+    pen_size: float = 2.5  # the flat filler's: its fan's lines are pen_size - 1 apart at b-c
     bvh_view: int | None = None
     parts: list[Callable[["ReaderBuilder"], None]] = field(default_factory=list)
     # the textured filler (reader_texture.py): with it, every triangle is drawn by cells
@@ -526,20 +529,24 @@ def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     c, pc = r.v("_c"), r.v("_pc")
     colour = [r.set("_c", _colour(r, t, material)),
               B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
-    # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
+    spacing = float(r.spec.pen_size) - 1  # the fan's lines at b-c (see the module docstring)
+    if not spacing > 0:
+        raise B.BlockError(f"the filler needs a pen size above 1, not {r.spec.pen_size}")
+    # a fan of k = ceiling(L / spacing) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
     # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring); one and two lines (most
-    # triangles) without the loop: the same points, the same arithmetic
+    # triangles) without the loop
     dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
     one = [B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))), B.pen_down(), B.goto_xy(ax, ay)]
-    two = [r.set("_x", add(bx, div(dx, 4))), r.set("_y", add(by, div(dy, 4))),
-           B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay), B.goto_xy(add(x, div(dx, 2)), add(y, div(dy, 2)))]
+    two = [B.goto_xy(add(bx, div(dx, 4)), add(by, div(dy, 4))), B.pen_down(), B.goto_xy(ax, ay),
+           B.goto_xy(add(bx, mul(dx, 0.75)), add(by, mul(dy, 0.75)))]
     many = [
         r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
         r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
         B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),
         # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd the
         # last point, from a
-        B.repeat(div(sub(n, 2), 2), [
+        r.set("_p", div(sub(n, 2), 2)),
+        B.repeat(r.v("_p"), [
             r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
             r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
         B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
@@ -547,8 +554,11 @@ def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     fill = [
         *colour,
         r.set("_dx", sub(cx(), bx)), r.set("_dy", sub(cy(), by)),
-        r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
-        B.if_(gt(n, 2), many, [B.if_(gt(n, 1), two, one)]),
+        # k > 2, k = 2, k = 1, told from L^2 (ceiling and square root only for a fan)
+        r.set("_n", add(mul(dx, dx), mul(dy, dy))),
+        B.if_(gt(n, 4 * spacing * spacing),
+              [r.set("_n", B.mathop("ceiling", B.sqrt(n) if spacing == 1 else div(B.sqrt(n), spacing))), *many],
+              [B.if_(gt(n, spacing * spacing), two, one)]),
         B.pen_up(),
     ]
     if check_usable:

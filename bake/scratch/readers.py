@@ -31,6 +31,10 @@ custom block                                what it does                        
                                             list without a BSP tree), fill every
                                             triangle that faces the camera on
                                             screen with the pen, in that order
+``fill triangle``                           (called by ``render``) the fan of    (the filler test,
+                                            the triangle whose projected corners tests/scratch)
+                                            ``render`` read (``_ax .. _by``, c at
+                                            ``_b``), in its colour
 ``load triangle (t)``                       (.sprite3, into-project) corners of  the mesh lists
                                             triangle t into ``x1 y1 z1 .. z3``,
                                             its colour into ``tri color``
@@ -561,6 +565,11 @@ def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
               [B.if_(gt(n, spacing * spacing), two, one)]),
         B.pen_up(),
     ]
+    # the drawing is a custom block of its own, so that the frame's two copies of the loop (a safe
+    # frame's and an unsafe one's) share it: two blocks a triangle drawn, not a second copy
+    if not r.has("fill triangle"):
+        r.define("fill triangle", [], fill)
+    fill = [B.call("fill triangle")]
     if check_usable:
         # an unusable corner's x is UNUSABLE_X; usable ones are within SAFE_X of the centre, so the
         # sum of |x| is below 3 * SAFE_X exactly when all three are usable

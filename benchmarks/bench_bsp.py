@@ -252,7 +252,8 @@ from bake import config, pipeline
 from bake.scratch.project import reader_spec
 from scratch_models import project_lists
 res = pipeline.run(config.load(data={"input": {"path": sys.argv[2]}, "bsp": {"enabled": True}}))
-files = res.scene.artefacts.outputs
+art = res.scene.artefacts  # typed since issue 38; a dict in the base commit
+files = art["outputs"] if isinstance(art, dict) else art.outputs
 stem = next(n for n in files if n.endswith(".sb3"))
 open(sys.argv[3], "wb").write(files[stem])
 lists = project_lists(files[stem])

@@ -72,7 +72,8 @@ if job.get("demo"):
 else:
     cfg = config.load(data=job["data"])
 res = pipeline.run(cfg)
-files = res.scene.artefacts.outputs
+art = res.scene.artefacts  # typed since issue 38; a dict in the previous reader's commit
+files = art["outputs"] if isinstance(art, dict) else art.outputs
 name = next(n for n in files if n.endswith(".sb3"))
 open(job["out"], "wb").write(files[name])
 print(json.dumps({"triangles": res.scene.n_triangles, "vertices": res.scene.n_vertices, "file": name}))

@@ -45,24 +45,23 @@ def draw_ranges(nodes: Sequence[float], planes: Sequence[float], eye: Sequence[f
             r = pop()
         elif T == 1:  # peel: the first part now, the rest after the child
             out.append((int(_item(nodes, r + 1)), int(_item(nodes, r + 2))))
-            stack.append(-(r + 3))
+            stack.append(-3 - r)
             r = r + 5
         else:  # split on the plane whose d is item T of the planes
             a, b, c, d = (float(_item(planes, T - k)) for k in (3, 2, 1, 0))
-            B = int(_item(nodes, r + 1))
-            if B < 0:
-                front, back = 0, -B
-            else:
-                front, back = r + 6, B
+            B = int(_item(nodes, r + 1))  # B < 0: no front child (the back one at -B); B = 0: no back child
             if ((a * ex + b * ey) + c * ez) - d >= 0:  # eye in front (or on the plane)
-                near, far, rng = front, back, r + 2
-            else:
-                near, far, rng = back, front, r + 4
-            if near > 0:
-                stack.append(near)  # drawn last
-            if int(_item(nodes, rng + 1)) > 0:
-                stack.append(-rng)  # then the coplanar triangles
-            r = far if far > 0 else pop()  # the far side first, at once
+                if not B < 0:
+                    stack.append(r + 6)  # the front child, drawn last
+                if int(_item(nodes, r + 3)) > 0:
+                    stack.append(-2 - r)  # then the coplanar triangles seen from the front
+                r = pop() if B == 0 else abs(B)  # the back child first, at once
+            else:  # eye behind
+                if B != 0:
+                    stack.append(abs(B))  # the back child, drawn last
+                if int(_item(nodes, r + 5)) > 0:
+                    stack.append(-4 - r)  # then the coplanar triangles seen from the back
+                r = pop() if B < 0 else r + 6  # the front child first, at once
         deepest = max(deepest, len(stack))
         if max_stack is not None and deepest > max_stack:
             raise RuntimeError(f"stack grew to {deepest} > {max_stack}")

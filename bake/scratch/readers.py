@@ -31,6 +31,10 @@ custom block                                what it does                        
                                             list without a BSP tree), fill every
                                             triangle that faces the camera on
                                             screen with the pen, in that order
+``fill triangle``                           (called by ``render``) the fan of    (the filler test,
+                                            the triangle whose projected corners tests/scratch)
+                                            ``render`` read (``_ax .. _by``, c at
+                                            ``_b``), in its colour
 ``load triangle (t)``                       (.sprite3, into-project) corners of  the mesh lists
                                             triangle t into ``x1 y1 z1 .. z3``,
                                             its colour into ``tri color``
@@ -69,15 +73,18 @@ the stage are simply not seen). A frame is *safe* when the model's bounding sphe
 numbers) is in front of ``near`` and its picture within those 4000 pixels; only an unsafe frame
 tests each vertex (an unusable one's screen x in ``_px`` becomes 1e9, and a triangle whose corners'
 ``|x|`` sum to more than 3 x 4000 is not drawn). The pen's colour is set only when it changes
-(``_pc``: the last colour set this frame). The filler draws a fan of ``k = ceiling(L)`` lines from the
-first corner ``a`` to the middles ``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c``
-(``L`` its length), walked ``q1, a, q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines.
-No point of the triangle is farther than half a pixel from a line (a point on the way from ``a``
-to a point ``x`` of ``b-c``, a fraction ``s`` along, is within ``s |x - q|`` of the line to the
-nearest ``q``, and ``|x - q| <= L / 2k <= 1/2``), so with pen size 2 everything within half a
-pixel of the triangle is painted and no line leaves it: no outline is needed. The BSP stage puts
-each triangle's corner opposite its shortest edge first (``bake.bsp.stage.apex_first``), so ``L``
-is short and the fan has few lines (one for a needle, ``L <= 1``).
+(``_pc``: the last colour set this frame). With pen size ``w`` (``ReaderSpec.pen_size``, 2.5) the
+filler draws a fan of ``k = ceiling(L / (w - 1))`` lines from the first corner ``a`` to the middles
+``q1 .. qk`` of ``k`` equal pieces of the opposite edge ``b-c`` (``L`` its length), walked ``q1, a,
+q2, q3, a, q4, q5, a, ...``: ``floor((3k - 1) / 2)`` lines. No point of the triangle is farther
+than ``(w - 1) / 2`` from a line (a point on the way from ``a`` to a point ``x`` of ``b-c``, a
+fraction ``s`` along, is within ``s |x - q|`` of the line to the nearest ``q``, and ``|x - q| <= L /
+2k <= (w - 1) / 2``), so the pen, ``w / 2`` wide on each side, paints everything within half a
+pixel of the triangle, and no line leaves it: no outline is needed. (Pen size 2 needs a line per
+pixel of ``L``, 2.5 one per 1.5 pixels; the wider pen reaches a quarter of a pixel farther out of
+the triangle, which the player suite's agreement with the preview bounds.) The BSP stage puts each triangle's corner opposite its shortest edge first
+(``bake.bsp.stage.apex_first``), so ``L`` is short and the fan has few lines (one for a needle,
+``L <= w - 1``); one and two lines are drawn without the loop.
 
 What the blocks cost (blocks executed per frame in scratch-vm, seconds in TurboWarp):
 ``benchmarks/bench_player.py``; per ray and per pixel: ``benchmarks/bench_scratch_vm.py``.
@@ -189,7 +196,7 @@ class ReaderSpec:
     two_sided: list[int] = field(default_factory=list)
     bounds: tuple[tuple[float, float, float], float] | None = None
     helpers: bool = False
-    pen_size: float = 2.0
+    pen_size: float = 2.5  # the flat filler's: its fan's lines are pen_size - 1 apart at b-c
     bvh_view: int | None = None
     parts: list[Callable[["ReaderBuilder"], None]] = field(default_factory=list)
     # the textured filler (reader_texture.py): with it, every triangle is drawn by cells
@@ -457,8 +464,8 @@ def _camera_blocks(r: ReaderBuilder) -> None:
         # the screen's scale folded into the depth: w = depth / focal, from sin / focal, cos / focal
         r.set("_spf", div(spt, var("focal"))), r.set("_cpf", div(cpt, var("focal"))),
         B.delete_all(px), B.delete_all(py), B.delete_all(pz),
-        r.set("_i", 1),
-        B.repeat(nverts, [*(node for x, y, z in points for node in (
+        r.set("_i", 1), r.set("_nv", nverts),
+        B.repeat(var("_nv"), [*(node for x, y, z in points for node in (
             r.set("_dx", sub(x, var("cam x"))),
             r.set("_dy", sub(y, var("cam y"))),
             r.set("_dz", sub(z, var("cam z"))),
@@ -474,27 +481,122 @@ def _camera_blocks(r: ReaderBuilder) -> None:
 
 
 # ---- the frame
-def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
+def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring;
-    :func:`_triangle_walk` for the other layouts)."""
+    :func:`_triangle_walk` for the other layouts). ``check_usable``: the blocks for an unsafe
+    frame (a corner may be unusable); the frame runs the copy without the test when ``_safe``."""
+    if r.spec.texture is not None:
+        return _textured_fill_blocks(r)
+    m = r.spec.mesh
+    walk = _triangle_walk(m)
+    px, py = "_px", "_py"
+    b = r.v("_b")
+    ax, ay, bx, by = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by"))
+    a2 = r.v("_a")
+
+    def point(k):  # the item number of corner k's projected point
+        return b if walk == "soup" else _index(m, item(b, m.tris if walk == "book" else m.tris[k - 1]))
+
+    # book: corner a's items are read at _b, b's at _b + 1, c's at _b + 2: _b steps along the record
+    # (one change instead of an add per corner and no index variables) and ends at c's item.
+    # soup: the same along the corners' projected points; split: _b is the triangle.
+    # Corners a and b go into variables; c's x and y are read where they are used (once in the
+    # facing test, once more only when the triangle is drawn): cheaper than a variable for a
+    # triangle turned away, which is most of them.
+    load: list[B.Node] = []
+    for k, (nx, ny) in ((1, ("_ax", "_ay")), (2, ("_bx", "_by"))):
+        load += [r.set(nx, item(point(k), px)), r.set(ny, item(point(k), py))]
+        if walk != "split":
+            load.append(r.change("_b", 1))
+
+    def cx():
+        return item(point(3), px)
+
+    def cy():
+        return item(point(3), py)
+
+    if walk == "book":
+        t, material = div(add(b, 1), 4), _index(m, item(add(b, 1), m.tris))
+    elif walk == "split":
+        t, material = b, _index(m, item(b, m.tris[3]))
+    else:
+        t = div(b, 3)
+        material = _index(m, item(t, m.tris))
+    # faces the camera: ((bx-ax)*(cy-ay)) - ((by-ay)*(cx-ax)) < 0, i.e. the first product is the
+    # smaller (a difference of doubles is negative exactly when the first is smaller)
+    first, second = mul(sub(bx, ax), sub(cy(), ay)), mul(sub(by, ay), sub(cx(), ax))
+    if _two_sided(r.spec):
+        two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
+        load += [r.set("_a", sub(first, second)),
+                 B.if_(eq(item(material, two), 1), [r.set("_a", sub(0, B.abs_(a2)))])]
+        faces = lt(a2, 0)
+    else:
+        faces = lt(first, second)
+    # the pen's colour is set only when it changes (a colour set costs TurboWarp more than the test)
+    c, pc = r.v("_c"), r.v("_pc")
+    colour = [r.set("_c", _colour(r, t, material)),
+              B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
+    spacing = float(r.spec.pen_size) - 1  # the fan's lines at b-c (see the module docstring)
+    if not spacing > 0:
+        raise B.BlockError(f"the filler needs a pen size above 1, not {r.spec.pen_size}")
+    # a fan of k = ceiling(L / spacing) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
+    # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring); one and two lines (most
+    # triangles) without the loop
+    dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
+    one = [B.goto_xy(add(bx, div(dx, 2)), add(by, div(dy, 2))), B.pen_down(), B.goto_xy(ax, ay)]
+    two = [B.goto_xy(add(bx, div(dx, 4)), add(by, div(dy, 4))), B.pen_down(), B.goto_xy(ax, ay),
+           B.goto_xy(add(bx, mul(dx, 0.75)), add(by, mul(dy, 0.75)))]
+    many = [
+        r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
+        r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
+        B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),
+        # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up), then with k - 1 odd the
+        # last point, from a
+        r.set("_p", div(sub(n, 2), 2)),
+        B.repeat(r.v("_p"), [
+            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
+            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
+        B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
+    ]
+    fill = [
+        *colour,
+        r.set("_dx", sub(cx(), bx)), r.set("_dy", sub(cy(), by)),
+        # k > 2, k = 2, k = 1, told from L^2 (ceiling and square root only for a fan)
+        r.set("_n", add(mul(dx, dx), mul(dy, dy))),
+        B.if_(gt(n, 4 * spacing * spacing),
+              [r.set("_n", B.mathop("ceiling", B.sqrt(n) if spacing == 1 else div(B.sqrt(n), spacing))), *many],
+              [B.if_(gt(n, spacing * spacing), two, one)]),
+        B.pen_up(),
+    ]
+    # the drawing is a custom block of its own, so that the frame's two copies of the loop (a safe
+    # frame's and an unsafe one's) share it: two blocks a triangle drawn, not a second copy
+    if not r.has("fill triangle"):
+        r.define("fill triangle", [], fill)
+    fill = [B.call("fill triangle")]
+    if check_usable:
+        # an unusable corner's x is UNUSABLE_X; usable ones are within SAFE_X of the centre, so the
+        # sum of |x| is below 3 * SAFE_X exactly when all three are usable
+        unusable = gt(add(add(B.abs_(ax), B.abs_(bx)), B.abs_(cx())), 3 * SAFE_X)
+        fill = [B.if_(not_(unusable), fill)]
+    return load + [B.if_(faces, fill)]
+
+
+def _textured_fill_blocks(r: ReaderBuilder) -> list[B.Node]:
+    """The textured filler's triangle (reader_texture.cell_fill): the corners' vertex numbers in
+    ``_va .. _vc``, their screen points in ``_ax .. _cy``, the facing and usable tests."""
     m = r.spec.mesh
     walk = _triangle_walk(m)
     px, py = "_px", "_py"
     b = r.v("_b")
     ax, ay, bx, by, cx, cy = (r.v(n) for n in ("_ax", "_ay", "_bx", "_by", "_cx", "_cy"))
     a2 = r.v("_a")
-    # book: corner a's items are read at _b, b's at _b + 1, c's at _b + 2: _b steps along the record
-    # (one change instead of an add per corner and no index variables); it ends at c's item.
-    # soup: the same along the corners' projected points; split: _b is the triangle
     load: list[B.Node] = []
-    textured = r.spec.texture is not None
-    corners = []  # (textured) each corner's projected point, kept for its depth
+    corners = []  # each corner's projected point, kept for its depth
     for k, name in ((1, "a"), (2, "b"), (3, "c")):
         point = b if walk == "soup" else _index(m, item(b, m.tris if walk == "book" else m.tris[k - 1]))
-        if textured:
-            load.append(r.set(f"_v{name}", point))
-            point = r.v(f"_v{name}")
-            corners.append(point)
+        load.append(r.set(f"_v{name}", point))
+        point = r.v(f"_v{name}")
+        corners.append(point)
         load += [r.set(f"_{name}x", item(point, px)), r.set(f"_{name}y", item(point, py))]
         if k < 3 and walk != "split":
             load.append(r.change("_b", 1))
@@ -509,41 +611,15 @@ def _fill_blocks(r: ReaderBuilder) -> list[B.Node]:
     if _two_sided(r.spec):
         two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])
         load.append(B.if_(eq(item(material, two), 1), [r.set("_a", sub(0, B.abs_(a2)))]))
-    # an unusable corner's x is UNUSABLE_X; usable ones are within SAFE_X of the centre, so the
-    # sum of |x| is below 3 * SAFE_X exactly when all three are usable
     unusable = gt(add(add(B.abs_(ax), B.abs_(bx)), B.abs_(cx)), 3 * SAFE_X)
     load.append(B.if_(eq(var("_safe"), 0), [B.if_(unusable, [r.set("_a", 0)])]))
-    # the pen's colour is set only when it changes (a colour set costs TurboWarp more than the test)
-    c, pc = r.v("_c"), r.v("_pc")
-    colour = [r.set("_c", _colour(r, t, material)),
-              B.if_(eq(c, pc), [], [B.set_pen_color(c), r.set("_pc", c)])]
-    # a fan of k = ceiling(L) lines from a to the middles of k equal pieces of b-c (L = |b-c|),
-    # walked q1, a, q2, q3, a, q4, q5, a, ... (see the module docstring)
-    dx, dy, n, x, y = (r.v(q) for q in ("_dx", "_dy", "_n", "_x", "_y"))
-    fill = [
-        *colour,
-        r.set("_dx", sub(cx, bx)), r.set("_dy", sub(cy, by)),
-        r.set("_n", B.mathop("ceiling", B.sqrt(add(mul(dx, dx), mul(dy, dy))))),
-        r.set("_dx", div(dx, n)), r.set("_dy", div(dy, n)),
-        r.set("_x", add(bx, div(dx, 2))), r.set("_y", add(by, div(dy, 2))),
-        B.goto_xy(x, y), B.pen_down(), B.goto_xy(ax, ay),  # k = 1 (a needle): that one line
-        # floor((k - 1) / 2) pairs (repeat rounds (k - 2) / 2 half up: none for k = 1 or 2), then
-        # with k - 1 odd the last point, from a
-        B.repeat(div(sub(n, 2), 2), [
-            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y),
-            r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y), B.goto_xy(ax, ay)]),
-        B.if_(eq(B.mod(n, 2), 0), [r.change("_x", dx), r.change("_y", dy), B.goto_xy(x, y)]),
-        B.pen_up(),
-    ]
-    if textured:
-        fill = cell_fill(r, r.spec.texture, t, material, _colour(r, t, material), corners)
+    fill = cell_fill(r, r.spec.texture, t, material, _colour(r, t, material), corners)
     return load + [B.if_(lt(a2, 0), fill)]
 
 
 def _render_blocks(r: ReaderBuilder) -> None:
     m = r.spec.mesh
     k = r.v("_k")
-    fill = _fill_blocks(r)
     walk = _triangle_walk(m)
     step = 2 if walk == "book" else 1  # to the next triangle's first item (the fill moved 2 in book and soup)
     textured = r.spec.texture is not None
@@ -555,23 +631,34 @@ def _render_blocks(r: ReaderBuilder) -> None:
     # a decoder (TextImage, packed lists) may have switched costumes; the pen needs the fence
     start.append(B.switch_costume("fence"))
     start.append(B.call("project vertices"))
-    if r.spec.bsp is not None:
-        ranges = r.lst("draw ranges")
-        frame = [
-            B.call("bsp walk"),
-            r.set("_k", 1),
-            B.repeat(div(B.list_length(ranges), 2), [
-                r.set("_b", {"book": lambda f: sub(mul(f, 4), 3), "split": lambda f: f,
-                             "soup": lambda f: sub(mul(f, 3), 2)}[walk](item(k, ranges))),
-                B.repeat(item(add(k, 1), ranges), [*fill, r.change("_b", step)]),
-                r.change("_k", 2),
-            ]),
-        ]
-    else:  # no tree: the list's order
+    # loop counts go into variables first: a repeat evaluates its count at every turn
+    nt = r.v("_nt")
+
+    def frame(fill: list[B.Node]) -> list[B.Node]:
+        if r.spec.bsp is not None:
+            ranges = r.lst("draw ranges")
+            return [
+                r.set("_k", 1),
+                r.set("_nr", div(B.list_length(ranges), 2)),
+                B.repeat(r.v("_nr"), [
+                    r.set("_b", {"book": lambda f: sub(mul(f, 4), 3), "split": lambda f: f,
+                                 "soup": lambda f: sub(mul(f, 3), 2)}[walk](item(k, ranges))),
+                    r.set("_nt", item(add(k, 1), ranges)),
+                    B.repeat(nt, [*fill, r.change("_b", step)]),
+                    r.change("_k", 2),
+                ]),
+            ]
+        # no tree: the list's order
         count = {"book": lambda: div(B.list_length(m.tris), 4), "split": lambda: B.list_length(m.tris[0]),
                  "soup": lambda: B.list_length(m.tris)}[walk]()
-        frame = [r.set("_b", 1), B.repeat(count, [*fill, r.change("_b", step)])]
-    r.define("render", [], start + frame)
+        return [r.set("_b", 1), r.set("_nt", count), B.repeat(nt, [*fill, r.change("_b", step)])]
+
+    walk_first = [B.call("bsp walk")] if r.spec.bsp is not None else []
+    if textured:
+        body = frame(_fill_blocks(r))
+    else:  # a safe frame skips the usable test (every corner is usable)
+        body = [B.if_(eq(var("_safe"), 0), frame(_fill_blocks(r, True)), frame(_fill_blocks(r, False)))]
+    r.define("render", [], start + walk_first + body)
 
 
 # ---- BSP
@@ -587,7 +674,7 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     ranges, stack = r.lst("draw ranges"), r.lst("_bsp stack")
     for n, val in (("cam x", r.spec.camera.x), ("cam y", r.spec.camera.y), ("cam z", r.spec.camera.z)):
         r.v(n, val)
-    rr, T, bb, fr, nr, g, nx = (r.v(x) for x in ("_r", "_T", "_B", "_front", "_near", "_g", "_next"))
+    rr, T, bb = (r.v(x) for x in ("_r", "_T", "_B"))
 
     def at(k):  # item (r + k) of nodes
         return item(add(rr, k), nodes)
@@ -606,15 +693,24 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
     def emit(first, n):  # a range into draw ranges
         return [B.add_to(ranges, item(first, nodes)), B.add_to(ranges, item(n, nodes))]
 
+    # a split record: B (item r + 1) says which children there are: the front child is the
+    # record at r + 6 unless B < 0, the back child at |B| unless B = 0. The near side is pushed
+    # (drawn last), then the coplanar range on the eye's side (its first at item g - 1, its count
+    # at g), and the far side is visited at once (or the stack popped when there is none).
+    def side(near_push, g, far):
+        return [*near_push,
+                B.if_(gt(at(g), 0), [B.add_to(stack, sub(1 - g, rr))]),
+                *far]
+
     split = [
         r.set("_B", at(1)),
-        B.if_(lt(bb, 0), [r.set("_front", 0), r.set("_B", sub(0, bb))], [r.set("_front", add(rr, 6))]),
-        # g: the item of the coplanar range's count on the eye's side (its first is item g - 1)
-        B.if_(behind, [r.set("_near", bb), r.set("_next", fr), r.set("_g", add(rr, 5))],
-              [r.set("_near", fr), r.set("_next", bb), r.set("_g", add(rr, 3))]),
-        B.if_(gt(nr, 0), [B.add_to(stack, nr)]),  # the near side is drawn last
-        B.if_(gt(item(g, nodes), 0), [B.add_to(stack, sub(1, g))]),  # then the coplanar range
-        B.if_(gt(nx, 0), [r.set("_r", nx)], pop()),  # the far side first, at once
+        B.if_(behind,
+              # eye behind: the back child near, the front child far, the range at r + 4
+              side([B.if_(not_(eq(bb, 0)), [B.add_to(stack, B.abs_(bb))])], 5,
+                   [B.if_(lt(bb, 0), pop(), [r.set("_r", add(rr, 6))])]),
+              # eye in front (or on the plane): the front child near, the back child far, the range at r + 2
+              side([B.if_(not_(lt(bb, 0)), [B.add_to(stack, add(rr, 6))])], 3,
+                   [B.if_(eq(bb, 0), pop(), [r.set("_r", B.abs_(bb))])])),
     ]
     r.define("bsp walk", [], [
         B.delete_all(ranges), B.delete_all(stack), B.add_to(stack, 0),
@@ -625,7 +721,7 @@ def _bsp_blocks(r: ReaderBuilder) -> None:
                 r.set("_T", item(rr, nodes)),
                 B.if_(lt(T, 2), [  # a leaf or a peel: its (first) range now
                     *emit(add(rr, 1), add(rr, 2)),
-                    B.if_(eq(T, 1), [B.add_to(stack, sub(0, add(rr, 3))), r.set("_r", add(rr, 5))], pop()),
+                    B.if_(eq(T, 1), [B.add_to(stack, sub(-3, rr)), r.set("_r", add(rr, 5))], pop()),
                 ], split),
             ], [*emit(sub(0, rr), sub(1, rr)), *pop()]),  # r < 0: the ready-made range at item -r
         ]),

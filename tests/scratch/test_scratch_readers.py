@@ -233,11 +233,12 @@ def test_demo_script_and_reader_without_bvh(baked):
 
 def _filler_triangles(rng) -> np.ndarray:
     """(T, 3, 2) stage-pixel triangles, clockwise on the stage (drawn), first corner opposite the
-    shortest edge (as the BSP stage writes them): needles (that edge 0.05-1 pixel, and just over
-    one pixel), small ones without a fan, and fans of every length 2-12 of both parities."""
+    shortest edge (as the BSP stage writes them): needles (that edge 0.05-1.5 pixels: one line with
+    pen size 2.5, and just over), two lines (up to 3 pixels, and just over), and fans of every length
+    3-12 of both parities (the edge up to 18 pixels)."""
     tris = []
-    shorts = list(np.linspace(0.05, 1.0, 12)) + [1.0 + 1e-9, 1.01, 1.3]
-    shorts += list(rng.uniform(1.5, 12.0, 40)) + [2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    shorts = list(np.linspace(0.05, 1.5, 12)) + [1.0 + 1e-9, 1.5 + 1e-9, 1.51, 2.0, 3.0, 3.0 + 1e-9]
+    shorts += list(rng.uniform(1.5, 18.0, 40)) + [4.5, 6.0, 7.5, 9.0, 10.5, 12.0, 13.5, 15.0, 16.5, 18.0]
     for k, L in enumerate(shorts):
         h = float(rng.uniform(max(L, 1.5), 40.0)) if k % 5 else float(rng.uniform(L, L + 2.0))
         ang = float(rng.uniform(0, 2 * np.pi))
@@ -257,11 +258,12 @@ def _filler_triangles(rng) -> np.ndarray:
 
 
 def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(vm, tmp_path):  # noqa: F811
-    """Each triangle the renderer fills: every point of it lies within half a pixel of one of its
-    pen lines (pen size 2: everything within half a pixel of the triangle is painted), no line
-    leaves it, and it costs the lines the filler's rule says: a fan of k = ceiling(L) lines to the
-    opposite edge (length L), walked in floor((3k - 1) / 2) lines, one for a needle (L <= 1)
-    (the lines counted from the strokes scratch-vm's pen made)."""
+    """Each triangle the renderer fills: every point of it lies within (w - 1) / 2 of one of its
+    pen lines (w: the pen size, 2.5; the pen paints w / 2 on each side, so everything within half a
+    pixel of the triangle is painted), no line leaves it, and it costs the lines the filler's rule
+    says: a fan of k = ceiling(L / (w - 1)) lines to the opposite edge (length L), walked in
+    floor((3k - 1) / 2) lines, one for a needle (L <= w - 1) (the lines counted from the strokes
+    scratch-vm's pen made)."""
     cam = readers.Camera()  # at (0, 0, -5) looking along +z, focal 300: a point (x, y, 0) is at 60 (x, y)
     tri_px = _filler_triangles(np.random.default_rng(11))
     T = len(tri_px)
@@ -287,7 +289,8 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
     assert readers.drawn(verts, lists["tris"], cam).all()
     # one group of strokes per triangle, each opened by pen down's dot at its first corner
     strokes = np.array(run["pen"], np.float64)
-    assert (strokes[:, 4] == 2).all()
+    pen = spec.pen_size
+    assert pen == 2.5 and (strokes[:, 4] == pen).all()
     dot = (strokes[:, 0] == strokes[:, 2]) & (strokes[:, 1] == strokes[:, 3])
     starts = np.flatnonzero(dot)
     assert len(starts) == T
@@ -296,6 +299,7 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
     bary = np.array([(x, y, 1 - x - y) for x in w for y in w if x + y <= 1 + 1e-12])
     bary = np.clip(bary, 0, 1)
     lines_needed = 0
+    ks = []
     for t, g in enumerate(groups):
         A, B, C = P[t]
         seg = g[1:, :4]
@@ -304,7 +308,7 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
         assert np.abs(g[:, 5:8] - rgb).max() <= 2, (t, g[:, 5:8].tolist(), rgb)
         # cost: the rule, counted independently of the blocks; the pen goes down at the first
         # point of the fan, in the middle of the first of the k pieces of b-c
-        k = max(1, math.ceil(math.sqrt(float(((C - B) ** 2).sum()))))
+        k = max(1, math.ceil(math.sqrt(float(((C - B) ** 2).sum())) / (pen - 1)))
         assert np.abs(g[0, :2] - (B + (C - B) / (2 * k))).max() < 1e-9, t
         want = (3 * k - 1) // 2
         assert len(seg) == want, (t, len(seg), want)
@@ -324,5 +328,7 @@ def test_filler_covers_each_triangle_within_half_a_pixel_with_the_fewest_lines(v
         dd = (d * d).sum(-1)
         along = np.clip(((Q[None] - p0) * d).sum(-1) / np.where(dd > 0, dd, 1), 0, 1)
         dist = np.sqrt((((p0 + along[..., None] * d) - Q[None]) ** 2).sum(-1)).min(axis=0)
-        assert dist.max() <= 0.5 + 1e-9, (t, float(dist.max()), float(math.sqrt(L2)))
+        assert dist.max() <= (pen - 1) / 2 + 1e-9, (t, float(dist.max()), float(math.sqrt(L2)))
+        ks.append(k)
     assert lines_needed == len(strokes) - T
+    assert set(range(1, 13)) <= set(ks)  # every path of the filler: one line, two, fans of both parities

@@ -5,8 +5,9 @@ view region can see, drop the rest (docs/hidden.md).
    the given points and the reader's camera as they are.
 2. Decide (``visibility.py``): from every eye, ``samples`` rays at stratified points of every
    triangle that could face it, all eyes in one batch through Embree; a triangle a ray draws
-   before it stops is seen. Then ``refine_rounds`` rounds aim ``refine`` x ``eyes`` new eyes (on
-   the sphere, in the boxes; ``refine`` x ``samples`` rays from a point or the camera) at the
+   before it stops is seen (an eye at a point or the camera: ``eyes`` x ``samples`` rays per
+   triangle, the same budget). Then ``refine_rounds`` rounds aim ``refine`` x ``eyes`` new eyes (on
+   the sphere, in the boxes; ``refine`` x more rays from a point or the camera) at the
    unseen triangles that share a corner with one seen so far (the edges of what shows, where a
    triangle partly seen, such as one crossing another surface, sits).
 3. Lit bakes (``keep_casters``): the hidden triangles that a kept triangle's light rays (towards
@@ -183,6 +184,7 @@ def _lights(scene: Scene, lighting: LightingConfig, rng: np.random.Generator
     return dirs, pts, bool(plan.ao or plan.sky or plan.bounces)
 
 
+FIXED = ("point", "camera")  # regions of one eye
 CONE_RAYS = 8  # more rays across a soft sun's disc or a light's sphere
 MAX_LEVEL = 8  # a kept triangle's points for the casters: at most an 8 x 8 cut (64 centroids)
 
@@ -215,7 +217,13 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     eyes, owner = regions_mod.eyes(regs, pos[used], cfg.eyes, rng)
 
     # ---- decide: every triangle from every eye, then rounds at the edges of what shows
-    seen, short = vis.targeted(eyes, np.arange(T), cfg.samples, cfg.seed, 0)
+    # a sampled region (outside, a box) has `eyes` eyes with `samples` rays each per triangle; a
+    # fixed eye (a point, the camera) has eyes x samples rays per triangle: the same budget
+    fixed = np.array([regs[k].kind in FIXED for k in owner], bool)
+    seen, short = vis.targeted(eyes[~fixed], np.arange(T), cfg.samples, cfg.seed, 0)
+    got, cut = vis.targeted(eyes[fixed], np.arange(T), cfg.samples * cfg.eyes, cfg.seed, 1)
+    seen |= got
+    short += cut
     rounds = [{"eyes": int(len(eyes)), "candidates": T, "seen": int(seen.sum())}]
     fresh = seen.copy()
     corners = corner_ids(pos, scene.triangles)
@@ -226,9 +234,10 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         # sampled regions (outside, boxes) get refine x more eyes; an eye at a point refine x more rays
         more, more_owner = regions_mod.eyes(regs, pos[used], cfg.eyes * cfg.refine,
                                             np.random.default_rng([cfg.seed, 2, r]))
-        fixed = np.array([regs[k].kind in ("point", "camera") for k in more_owner], bool)
-        got, cut = vis.targeted(more[~fixed], cand, cfg.samples, cfg.seed, 2 * r + 1)
-        got2, cut2 = vis.targeted(more[fixed], cand, cfg.samples * cfg.refine, cfg.seed, 2 * r + 2)
+        fixed = np.array([regs[k].kind in FIXED for k in more_owner], bool)
+        got, cut = vis.targeted(more[~fixed], cand, cfg.samples, cfg.seed, 2 * r + 2, corners=True)
+        got2, cut2 = vis.targeted(more[fixed], cand, cfg.samples * cfg.eyes * cfg.refine, cfg.seed, 2 * r + 3,
+                                  corners=True)
         got |= got2
         short += cut + cut2
         fresh = got & ~seen

@@ -32,6 +32,9 @@ from ...lighting.rays import CHUNK_RAYS, Tracer, parallel
 
 MAX_CHAIN = 64  # continuations through see-through and culled triangles, per ray
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+CORNER_INSET = 1e-3
+MIN_BATCH_RAYS = 1 << 15  # a batch of eyes aims at least this many rays (the calls' overhead)
+INSET = (1.0 - 1.5 * CORNER_INSET) * np.eye(3) + 0.5 * CORNER_INSET  # barycentrics just inside the corners
 
 
 def stratified_barycentric(k: int, r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
@@ -92,17 +95,38 @@ class Visibility:
         return cat(rays_out), cat(prims_out), int(len(idx))
 
     # ------------------------------------------------------------------ deciding
-    def targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int
-                 ) -> tuple[np.ndarray, int]:
+    def targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
+                 batch: int = 8, corners: bool = False) -> tuple[np.ndarray, int]:
         """``(seen (T,) bool, rays cut short)``: from every eye, ``samples`` rays at stratified
-        points of each candidate triangle whose front faces the eye (or that is two-sided)."""
+        points of each candidate triangle whose front faces the eye (or that is two-sided). The
+        eyes go in batches of ``batch``; a batch aims only at the candidates no batch before it saw
+        (a triangle seen once is decided), so a dropped triangle was aimed at from every eye.
+        ``corners``: also aim just inside each corner (``CORNER_INSET`` of the way to the others):
+        the piece of a triangle that pokes out through another surface holds a corner unless
+        the surface bulges through the triangle's middle."""
+        seen = np.zeros(self.T, bool)
+        short = 0
+        cand = np.asarray(candidates, np.int64)
+        first, b = 0, 0
+        while first < len(eyes) and len(cand):
+            # at least `batch` eyes, and enough for a batch of MIN_BATCH_RAYS rays (few candidates)
+            n = max(batch, -(-MIN_BATCH_RAYS // (len(cand) * (samples + 3 * corners))))
+            got, cut = self._targeted(eyes[first:first + n], cand, samples, seed, stream * 4099 + b, corners)
+            seen |= got
+            short += cut
+            cand = cand[~seen[cand]]
+            first, b = first + n, b + 1
+        return seen, short
+
+    def _targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
+                  corners: bool) -> tuple[np.ndarray, int]:
         cand = np.asarray(candidates, np.int64)
         E, C = len(eyes), len(cand)
         seen = np.zeros(self.T, bool)
         short = [0]
         if E == 0 or C == 0:
             return seen, 0
-        per = max(1, CHUNK_RAYS // samples)
+        per = max(1, CHUNK_RAYS // (samples + 3 * corners))
         lock = threading.Lock()
 
         def work(a: int, b: int) -> None:
@@ -114,8 +138,11 @@ class Visibility:
             ok = (np.einsum("ij,ij->i", self.normal[t], rel) > 0) | self.two_sided[t]
             e, t, r1, r2 = e[ok], t[ok], r1[ok], r2[ok]
             w = stratified_barycentric(samples, r1, r2)  # (n, k, 3)
+            if corners:
+                w = np.concatenate([w, np.broadcast_to(INSET, (len(w), 3, 3))], axis=1)
+            k = w.shape[1]
             target = np.einsum("nkc,ncx->nkx", w, self.corners[t]).reshape(-1, 3)
-            o = np.repeat(eyes[e], samples, axis=0)
+            o = np.repeat(eyes[e], k, axis=0)
             d = target - o
             ln = np.linalg.norm(d, axis=1)
             good = ln > 0

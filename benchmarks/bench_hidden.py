@@ -9,7 +9,7 @@ the bytes the lists add to project.json with the stage off and on (the export st
 each: wrong pixels, pixels showing the model), the stage's seconds (deciding, and the proof), and
 against them the seconds of a 64-sample AO bake of the same scene (the lighting stage with AO
 alone, ``target = "vertex"``; the issue's cost bound). Suzanne is also built into a BSP tree with
-the stage off and on (split inflation), and decided again with seeds 0 to 7 (each with its own
+the stage off, on, and on with ``trim = true`` (split inflation, triangles written), and decided again with seeds 0 to 7 (each with its own
 held-out eyes: the wrong pixels per seed). The Cornell box is seen from an inside box region (the
 middle 60% of the room), the rest from outside. Single runs on a shared 2-core machine: the CPU
 seconds are given beside the wall seconds.
@@ -90,12 +90,20 @@ def run_model(key: str, holdout: int) -> dict:
     }
     if key == "suzanne":
         bsp = {}
-        for name, c in (("off", cfg), ("on", on)):
-            c2 = pipeline.load_config_for(path, base + (sets if name == "on" else []) + ["bsp.enabled=true"])
+        n_model = rec.counts_in["triangles"]
+        for name, extra in (("off", None), ("on", sets), ("on, trim = true", sets + ["mesh.hidden.trim=true"])):
+            c2 = pipeline.load_config_for(path, base + (extra or []) + ["bsp.enabled=true"])
             res = pipeline.run(c2, cache=None)
             b = next(r for r in res.records if r.name == "bsp")
             bsp[name] = {"triangles_in": b.counts_in["triangles"], "triangles_out": b.counts_out["triangles"],
-                         "inflation": round(b.accuracy["inflation"], 4)}
+                         "inflation": round(b.accuracy["inflation"], 4),
+                         "out_vs_model": round(b.counts_out["triangles"] / n_model - 1.0, 4)}
+            h = next((r for r in res.records if r.name == "hidden"), None)
+            if h is not None:
+                hh = h.details["holdout"]
+                bsp[name].update({"hidden_seconds": round(h.seconds, 4), "wrong_pixels": hh["wrong_pixels"],
+                                  "pixels_showing": hh["pixels_showing_the_model"], "holdout_eyes": hh["eyes"],
+                                  "trim": h.details.get("trim")})
         row["bsp"] = bsp
         # the same with other seeds: how often the held-out eyes find a dropped triangle
         row["seeds"] = []

@@ -166,6 +166,9 @@ class HiddenConfig:
     # rounds of more eyes (refine x eyes) aimed at the unseen triangles that touch a seen one
     refine: int = 8
     refine_rounds: int = 3
+    # cut triangles that pass through each other along each other's planes first, so that the
+    # pieces inside are dropped and those that show kept (a source that loses no piece stays whole)
+    trim: bool = False
     # "culled": a single-sided triangle is drawn (and hides what is behind it) only from its front,
     # as the reader sprite and bake.render draw it; "drawn": every triangle from both sides
     back_faces: Literal["culled", "drawn"] = "culled"

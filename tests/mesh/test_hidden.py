@@ -407,3 +407,64 @@ def test_the_reader_camera_region_is_the_green_flag_eye():
     assert ref <= got and all(numpy_sees(tri, eye, t) for t in got - ref)
     assert not any(numpy_sees(tri, eye, t, 2000) for t in set(range(s.n_triangles)) - got)
     assert out.n_triangles < s.n_triangles
+
+
+# ----------------------------------------------------------------------------- trimming
+def test_cut_pieces_tile_the_triangle_and_keep_to_one_side_of_each_plane():
+    from bake.mesh.hidden import trim
+
+    tri = (np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0.0]]), np.array([[0, 1, 2]]))
+    wall_x = quad([[1, -1, -1], [1, -1, 1], [1, 5, 1], [1, 5, -1]])
+    wall_y = quad([[-1, 2.5, -1], [5, 2.5, -1], [5, 2.5, 1], [-1, 2.5, 1]])
+    s = scene_of(tri, wall_x, wall_y)
+    pairs = trim.crossing(s, 1e-9)
+    assert {0} <= set(pairs.ravel()) and len(pairs) == 6  # the triangle crosses 4, the walls each other
+    pieces = trim.cut(s, pairs, 1e-9)
+    mine = pieces["src"] == 0
+    P = np.einsum("fkc,fcx->fkx", pieces["bary"][mine], s.triangle_vertices()[[0]].repeat(mine.sum(), 0))
+    area = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    assert area.sum() == pytest.approx(8.0, rel=1e-12)
+    for axis, at in ((0, 1.0), (1, 2.5)):  # every piece on one side of x = 1 and of y = 2.5
+        d = P[:, :, axis] - at
+        assert np.all((d.max(axis=1) <= 1e-12) | (d.min(axis=1) >= -1e-12))
+
+
+def test_trimming_drops_the_inside_of_a_peg_and_leaves_the_picture_as_it_was():
+    """A peg half sunk through a box's top: with trim, what is inside the box goes, the kept peg
+    area is its outside part (analytic), no crossing is left, and a z-buffer from outside eyes
+    draws the same depths as before."""
+    from bake.bsp.crossing import crossing_pairs
+
+    base = box([-2, -2, -2], [2, 2, 2])
+    peg = box([-0.5, 1.0, -0.5], [0.5, 3.0, 0.5])  # from y = 1 (inside) to y = 3 (outside)
+    s = scene_of(base, peg)
+    assert len(crossing_pairs(s.positions, s.triangles, 1e-9)) > 0
+    plain, _ = run(s)
+    out, rec = run(s, trim=True, holdout_eyes=32)
+    assert rec.accuracy["wrong_pixels"] == 0 and rec.details["trim"]["pieces_dropped"] > 0
+    assert len(crossing_pairs(out.positions, out.triangles, 1e-9)) == 0
+    tri = out.triangle_vertices()
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    peg_part = np.all(np.abs(tri[:, :, [0, 2]]) <= 0.5 + 1e-12, axis=(1, 2)) & np.all(tri[:, :, 1] >= 2 - 1e-12, axis=1)
+    # the peg's outside: 4 sides of 1 x 1 and its top; the box top loses the 1 x 1 hole
+    assert area[peg_part].sum() == pytest.approx(4 * 1.0 + 1.0, rel=1e-9)
+    assert area.sum() == pytest.approx(6 * 16 - 1 + 5, rel=1e-9)
+    # without trimming only the peg's bottom (inside the box) goes: every crossing triangle shows a part
+    assert plain.n_triangles == s.n_triangles - 2
+    c, r = regions.bounding_sphere(s.positions)
+    for d in regions.sphere_eyes(8, np.random.default_rng(4)):
+        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
+        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
+        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
+        assert same.mean() > 0.995  # (pixel centres on a cut edge may fall either way)
+
+
+def test_trimming_is_deterministic_and_off_by_default():
+    assert HiddenConfig().trim is False
+    rng = np.random.default_rng(6)
+    parts = [box(c - 0.5, c + 0.5) for c in rng.uniform(-0.8, 0.8, (6, 3))]
+    s = scene_of(*parts)
+    a, ra = run(s, trim=True, threads=1)
+    b, rb = run(s, trim=True, threads=2)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.triangles, b.triangles)
+    assert ra.details["trim"] == rb.details["trim"]

@@ -38,6 +38,7 @@ from ...record import ReportSection, StageRecord
 from ...scene import Material, Scene
 from ..clean import unique_rows
 from . import regions as regions_mod
+from . import trim as trim_mod
 from .visibility import Visibility
 
 
@@ -184,6 +185,8 @@ def _lights(scene: Scene, lighting: LightingConfig, rng: np.random.Generator
     return dirs, pts, bool(plan.ao or plan.sky or plan.bounces)
 
 
+TRIM_EPS = 1e-6  # trimming: a corner this close to a cutting plane (x the diagonal) is on it
+TRIM_MIN_AREA = 1e-12  # pieces smaller than this x the diagonal squared are left out
 FIXED = ("point", "camera")  # regions of one eye
 CONE_RAYS = 8  # more rays across a soft sun's disc or a light's sphere
 MAX_LEVEL = 8  # a kept triangle's points for the casters: at most an 8 x 8 cut (64 centroids)
@@ -206,9 +209,20 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     if T == 0:
         rec.idle = "no triangles"
         return scene, rec
+    original = scene
+    camera = _camera_eye(scene) if cfg.camera else None
+    # ---- trimming: crossing triangles cut along each other's planes, decided piece by piece
+    trimmed = None
+    if cfg.trim:
+        tol = TRIM_EPS * scene.scale()
+        pairs = trim_mod.crossing(scene, tol)
+        if len(pairs):
+            pieces = trim_mod.cut(scene, pairs, tol)
+            scene, src, n_uncut = trim_mod.cut_scene(scene, pieces, TRIM_MIN_AREA * scene.scale() ** 2)
+            trimmed = (src, n_uncut, int(len(pairs)))
+        T = scene.n_triangles
     pos = scene.positions
     used = scene.used_vertex_mask()
-    camera = _camera_eye(scene) if cfg.camera else None
     regs = regions_mod.regions_of(cfg, pos[used], camera)
     clear, clear_names = see_through(scene)
     sided = two_sided(scene, cfg.back_faces)
@@ -263,7 +277,18 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         keep |= hit
 
     dropped = ~keep
-    out = keep_triangles(scene, keep) if dropped.any() else scene
+    trim_info: dict[str, Any] | None = None
+    if trimmed is not None:
+        union, keep_union, source, trim_info = trim_mod.merge_back(original, scene, trimmed[0], trimmed[1], keep)
+        trim_info["crossing_pairs"] = trimmed[2]
+        union, keep_union, trim_info["outlines_redrawn"] = trim_mod.outline(
+            union, keep_union, original.n_triangles, np.concatenate(
+                [source, np.full(union.n_triangles - len(source), -1, np.int64)]), original.scale(),
+            TRIM_EPS * original.scale())
+        out = keep_triangles(union, keep_union)
+    else:
+        out = keep_triangles(scene, keep) if dropped.any() else scene
+    out.validate()
     decide_seconds = time.perf_counter() - t0
     decide_rays = vis.rays
 
@@ -291,15 +316,15 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
                      "mesh.hidden.samples")
 
     n_per = cfg.eyes * cfg.samples
-    rec.counts_in = {"vertices": scene.n_vertices, "triangles": T, "polygons": scene.n_polygons,
-                     "materials": len(scene.materials)}
+    rec.counts_in = {"vertices": original.n_vertices, "triangles": original.n_triangles,
+                     "polygons": original.n_polygons, "materials": len(original.materials)}
     rec.counts_out = {"vertices": out.n_vertices, "triangles": out.n_triangles, "polygons": out.n_polygons,
                       "materials": len(out.materials)}
     rec.details = {
         "regions": [{"kind": g.kind, "label": g.label, "eyes": int((owner == i).sum())} for i, g in enumerate(regs)],
         "eyes": int(len(eyes)), "samples": cfg.samples, "rounds": rounds,
         "seen": int(seen.sum()), "casters_kept": casters, "dropped": int(dropped.sum()),
-        "vertices_dropped": scene.n_vertices - out.n_vertices,
+        "vertices_dropped": original.n_vertices - out.n_vertices,
         "see_through_triangles": int(clear.sum()), "see_through_materials": clear_names,
         "two_sided_triangles": int(sided.sum()), "back_faces": cfg.back_faces,
         "rays": decide_rays, "cut_short": short, "decide_seconds": round(decide_seconds, 6),
@@ -309,6 +334,8 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         "miss_bound": {f"p={p:g}": float((1.0 - p) ** n_per) for p in (0.001, 0.01, 0.05)},
         "holdout": proof,
     }
+    if trim_info is not None:
+        rec.details["trim"] = trim_info
     if camera is not None:
         rec.details["camera_eye"] = [float(x) for x in camera]
     if cfg.camera and camera is None:

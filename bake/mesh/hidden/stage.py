@@ -1,6 +1,9 @@
 """The hidden-geometry stage (``[mesh.hidden]``, off by default): keep the triangles an eye in the
 view region can see, drop the rest (docs/hidden.md).
 
+0. With ``trim`` (``trim.py``): triangles that pass through each other are cut along each other's
+   planes first, and the steps below decide piece by piece; a source that loses no piece is
+   written whole, one that does keeps its pieces or the outline of them.
 1. Eyes (``regions.py``): ``eyes`` seeded, stratified eyes on the outside sphere and in each box;
    the given points and the reader's camera as they are.
 2. Decide (``visibility.py``): from every eye, ``samples`` rays at stratified points of every

@@ -104,6 +104,10 @@ STAGES: tuple[StageSpec, ...] = (
               keys=("mesh.triangulate.",), leaves="triangles"),
     StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean, lambda c: c.mesh.clean.enabled,
               "mesh.clean.enabled", keys=("mesh.clean.",), leaves="triangles"),
+    StageSpec("hidden", "bake.mesh.hidden.stage:stage", "bake.mesh.hidden.stage:job", lambda c: c.mesh.hidden.enabled,
+              "mesh.hidden.enabled", keys=("mesh.hidden.",), error=("wrong_pixel_share", "share of held-out "
+                                                                     "pixels showing a dropped triangle"),
+              report="bake.mesh.hidden.stage:section"),
     StageSpec("simplify", "bake.mesh.simplify.stage:stage", lambda c: c.mesh.simplify, lambda c: c.mesh.simplify.enabled,
               "mesh.simplify.enabled", keys=("mesh.simplify.",),
               error=("hausdorff_max", "Hausdorff max, fraction of the diagonal"),

@@ -16,14 +16,14 @@ from .keys import FILE_RELATIVE_KEYS, PATH_KEYS, all_keys, get_key, key_defaults
 from .loader import apply_override, load, parse_value, validate
 from .origins import error_at, origin
 from .schema import (RESERVED_OUTPUT_NAMES, AOConfig, BouncesConfig, BSPConfig, BVHConfig, CacheConfig, CleanConfig,
-                     Config, ExportConfig, ImportConfig, ImportJob, InputConfig, LightConfig, LightingConfig,
+                     Config, ExportConfig, HiddenBox, HiddenConfig, ImportConfig, ImportJob, InputConfig, LightConfig, LightingConfig,
                      LightmapConfig, ListNames, MeshConfig, ReportConfig, ShadowsConfig, SimplifyConfig, SkyConfig,
                      TexturesConfig, TransformConfig, TriangulateConfig, stage_sections, use_stage_sections)
 
 __all__ = ["ConfigError", "FILE_RELATIVE_KEYS", "PATH_KEYS", "all_keys", "get_key", "key_defaults", "numeric_keys", "to_dict",
            "apply_override", "load", "parse_value", "validate", "error_at", "origin", "RESERVED_OUTPUT_NAMES",
            "AOConfig", "BouncesConfig", "BSPConfig", "BVHConfig", "CacheConfig", "CleanConfig", "Config",
-           "ExportConfig", "ImportConfig", "ImportJob", "InputConfig", "LightConfig", "LightingConfig",
+           "ExportConfig", "HiddenBox", "HiddenConfig", "ImportConfig", "ImportJob", "InputConfig", "LightConfig", "LightingConfig",
            "LightmapConfig", "ListNames", "MeshConfig", "ReportConfig", "ShadowsConfig", "SimplifyConfig",
            "SkyConfig", "TexturesConfig", "TransformConfig", "TriangulateConfig", "stage_sections",
            "use_stage_sections"]

@@ -137,9 +137,76 @@ class SimplifyConfig:
 
 
 @dataclass
+class HiddenBox:
+    """A box of eyes for the hidden-geometry stage (scene coordinates, as transformed)."""
+
+    min: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    max: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    def check(self, need: Need) -> None:
+        need(len(self.min) == 3, "min", f"must be [x, y, z] (got {self.min!r})")
+        need(len(self.max) == 3, "max", f"must be [x, y, z] (got {self.max!r})")
+        need(all(a <= b for a, b in zip(self.min, self.max)), "max",
+             f"must be >= min in every coordinate (min = {self.min!r}, max = {self.max!r})")
+
+
+@dataclass
+class HiddenConfig:
+    """Hidden-geometry removal (bake/mesh/hidden/, docs/hidden.md): keep the triangles an eye in the
+    view region can see, drop the rest. Off by default."""
+
+    enabled: bool = False
+    # The view region, a union: eyes anywhere outside the model (on a sphere around it: every
+    # direction), the reader's green-flag camera, the given points and the given boxes.
+    outside: bool = True
+    camera: bool = False
+    points: list[list[float]] = field(default_factory=list)  # [[x, y, z], ...]
+    boxes: list[HiddenBox] = field(default_factory=list)  # [[mesh.hidden.boxes]] min = [...], max = [...]
+    eyes: int = 64  # eyes sampled on the outside sphere and in each box
+    samples: int = 2  # rays per eye and triangle, aimed at stratified points of the triangle
+    # rounds of more eyes (refine x eyes) aimed at the unseen triangles that touch a seen one
+    refine: int = 8
+    refine_rounds: int = 3
+    # cut triangles that pass through each other along each other's planes first, so that the
+    # pieces inside are dropped and those that show kept (a source that loses no piece stays whole)
+    trim: bool = False
+    # "culled": a single-sided triangle is drawn (and hides what is behind it) only from its front,
+    # as the reader sprite and bake.render draw it; "drawn": every triangle from both sides
+    back_faces: Literal["culled", "drawn"] = "culled"
+    # in a lit bake, also keep the hidden triangles that shadow or bounce light onto kept ones
+    keep_casters: bool = True
+    caster_samples: int = 16  # hemisphere rays per sample point of a kept triangle (AO, sky, bounces)
+    # the proof: held-out eyes (not those that decided), each with a grid of pixels: a square view
+    # just holding the model's bounding sphere from an outside eye, a cube map (6 faces) around an
+    # eye in a box, at a point or at the camera
+    holdout_eyes: int = 64
+    holdout_pixels: int = 64  # pixels along the side of a view or of a cube-map face
+    threads: int = 0  # 0 = all cores
+    seed: int = 0
+
+    def check(self, need: Need) -> None:
+        need(self.outside or self.camera or bool(self.points) or bool(self.boxes), "outside",
+             "the view region is empty: set outside = true or camera = true, or give points or "
+             "[[mesh.hidden.boxes]]")
+        for i, p in enumerate(self.points):
+            need(len(p) == 3, f"points[{i}]", f"must be [x, y, z] (got {p!r})")
+        need(1 <= self.eyes <= 100_000, "eyes", f"must be between 1 and 100000 (got {self.eyes})")
+        need(1 <= self.samples <= 64, "samples", f"must be between 1 and 64 (got {self.samples})")
+        need(self.refine >= 0, "refine", f"must be >= 0 (0 = no refinement; got {self.refine})")
+        need(self.refine_rounds >= 0, "refine_rounds", f"must be >= 0 (got {self.refine_rounds})")
+        need(0 <= self.caster_samples <= 1024, "caster_samples",
+             f"must be between 0 and 1024 (got {self.caster_samples})")
+        need(self.holdout_eyes >= 0, "holdout_eyes", f"must be >= 0 (0 = no proof; got {self.holdout_eyes})")
+        need(2 <= self.holdout_pixels <= 512, "holdout_pixels",
+             f"must be between 2 and 512 (got {self.holdout_pixels})")
+        need(self.threads >= 0, "threads", f"must be >= 0 (0 = all cores; got {self.threads})")
+
+
+@dataclass
 class MeshConfig:
     triangulate: TriangulateConfig = field(default_factory=TriangulateConfig)
     clean: CleanConfig = field(default_factory=CleanConfig)
+    hidden: HiddenConfig = field(default_factory=HiddenConfig)
     simplify: SimplifyConfig = field(default_factory=SimplifyConfig)
 
 

@@ -1,0 +1,301 @@
+"""Which triangles an eye sees: Embree rays, batched over every eye (docs/hidden.md).
+
+A ray *draws* the triangle it hits when the triangle's front faces the ray's origin, or the
+triangle is two-sided (``back_faces = "drawn"`` makes every triangle two-sided): the rule of the
+reader sprite and ``bake.render``, whose culling is ``dot(cross(b - a, c - a), eye - a) > 0``. A
+ray stops at the first triangle it draws that is opaque; it goes on through a triangle it does
+not draw (the back of a single-sided one: culled, so it hides nothing) and through a see-through
+one (drawn, and what is behind it shows). Every triangle a ray draws before it stops is *seen*.
+Each such continuation is one more vectorised Embree call over all the rays still going, from
+just past the hit (``Tracer.epsilon``), at most ``MAX_CHAIN`` times.
+
+Three uses, each a batch of rays cut into fixed chunks (deterministic for any thread count; every
+chunk's random numbers come from its own ``(seed, stream, chunk)`` generator):
+
+* :meth:`Visibility.targeted`: from every eye, ``samples`` rays at stratified points of each
+  candidate triangle that could face it;
+* :meth:`Visibility.pixels`: a pixel grid from each held-out eye (a view holding the model from an
+  outside eye, a cube map around an eye in a box or at a point), and the pixels whose ray draws a
+  dropped triangle (the proof);
+* :meth:`Visibility.casters`: from points of the kept triangles towards the lights and over the
+  hemisphere, the first triangle hit (what shadows or bounces light onto them: lighting's rays see
+  every triangle from both sides).
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from ...lighting.rays import CHUNK_RAYS, Tracer, parallel
+
+MAX_CHAIN = 64  # continuations through see-through and culled triangles, per ray
+GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+CORNER_INSET = 1e-3
+MIN_BATCH_RAYS = 1 << 15  # a batch of eyes aims at least this many rays (the calls' overhead)
+INSET = (1.0 - 1.5 * CORNER_INSET) * np.eye(3) + 0.5 * CORNER_INSET  # barycentrics just inside the corners
+
+
+def stratified_barycentric(k: int, r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """(n, k, 3) barycentric weights: point ``j`` of ``k`` in the ``j``-th of ``k`` equal-area
+    strata of the triangle (square-root warp of a shifted rank-1 lattice; ``r1``, ``r2`` (n,)
+    are the shifts)."""
+    j = np.arange(k, dtype=np.float64)
+    u = (j[None, :] + r1[:, None]) / k
+    v = np.mod(r2[:, None] + j[None, :] * GOLDEN, 1.0)
+    s = np.sqrt(u)
+    return np.stack([1.0 - s, s * (1.0 - v), s * v], axis=-1)
+
+
+class Visibility:
+    def __init__(self, positions: np.ndarray, triangles: np.ndarray, *, two_sided: np.ndarray,
+                 see_through: np.ndarray, threads: int = 0):
+        self.pos = np.asarray(positions, np.float64)
+        self.tris = np.asarray(triangles, np.int64)
+        self.corners = self.pos[self.tris]
+        c = self.corners
+        self.normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        self.two_sided = np.asarray(two_sided, bool)
+        self.see_through = np.asarray(see_through, bool)
+        self.tracer = Tracer(self.pos, self.tris, threads=threads)
+        self.T = len(self.tris)
+        self.rays = 0
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ the chain of one batch
+    def chain(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """Rays from world points ``o`` along unit ``d`` (float64): ``(ray, triangle)`` of every
+        triangle drawn before each ray stops, and the rays cut short after MAX_CHAIN steps."""
+        n = len(o)
+        idx = np.arange(n)
+        start = self.tracer.to_local(o)
+        d = np.asarray(d, np.float64)
+        rays_out, prims_out = [], []
+        casts = 0
+        for _ in range(MAX_CHAIN):
+            if len(idx) == 0:
+                break
+            h = self.tracer.intersect(start.astype(np.float32), d.astype(np.float32))
+            casts += len(idx)
+            prim = np.asarray(h["prim"], np.int64)
+            hit = (prim >= 0) & (prim < self.T)
+            idx, start, d, prim = idx[hit], start[hit], d[hit], prim[hit]
+            t = np.asarray(h["t"], np.float64)[hit]
+            drawn = (np.einsum("ij,ij->i", self.normal[prim], d) < 0) | self.two_sided[prim]
+            rays_out.append(idx[drawn])
+            prims_out.append(prim[drawn])
+            go = ~drawn | self.see_through[prim]
+            idx, start, d, t = idx[go], start[go], d[go], t[go]
+            at = start + t[:, None] * d
+            start = at + self.tracer.epsilon(at)[:, None] * d
+        with self._lock:
+            self.rays += casts
+        cat = (lambda a: np.concatenate(a) if a else np.zeros(0, np.int64))
+        return cat(rays_out), cat(prims_out), int(len(idx))
+
+    # ------------------------------------------------------------------ deciding
+    def targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
+                 batch: int = 8, corners: bool = False) -> tuple[np.ndarray, int]:
+        """``(seen (T,) bool, rays cut short)``: from every eye, ``samples`` rays at stratified
+        points of each candidate triangle whose front faces the eye (or that is two-sided). The
+        eyes go in batches of ``batch``; a batch aims only at the candidates no batch before it saw
+        (a triangle seen once is decided), so a dropped triangle was aimed at from every eye.
+        ``corners``: also aim just inside each corner (``CORNER_INSET`` of the way to the others):
+        the piece of a triangle that pokes out through another surface holds a corner unless
+        the surface bulges through the triangle's middle."""
+        seen = np.zeros(self.T, bool)
+        short = 0
+        cand = np.asarray(candidates, np.int64)
+        first, b = 0, 0
+        while first < len(eyes) and len(cand):
+            # at least `batch` eyes, and enough for a batch of MIN_BATCH_RAYS rays (few candidates)
+            n = max(batch, -(-MIN_BATCH_RAYS // (len(cand) * (samples + 3 * corners))))
+            got, cut = self._targeted(eyes[first:first + n], cand, samples, seed, stream * 4099 + b, corners)
+            seen |= got
+            short += cut
+            cand = cand[~seen[cand]]
+            first, b = first + n, b + 1
+        return seen, short
+
+    def _targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
+                  corners: bool) -> tuple[np.ndarray, int]:
+        cand = np.asarray(candidates, np.int64)
+        E, C = len(eyes), len(cand)
+        seen = np.zeros(self.T, bool)
+        short = [0]
+        if E == 0 or C == 0:
+            return seen, 0
+        per = max(1, CHUNK_RAYS // (samples + 3 * corners))
+        lock = threading.Lock()
+
+        def work(a: int, b: int) -> None:
+            rng = np.random.default_rng([seed, stream, a // per])
+            q = np.arange(a, b)
+            e, t = q // C, cand[q % C]
+            r1, r2 = rng.random(len(q)), rng.random(len(q))
+            rel = eyes[e] - self.corners[t, 0]
+            ok = (np.einsum("ij,ij->i", self.normal[t], rel) > 0) | self.two_sided[t]
+            e, t, r1, r2 = e[ok], t[ok], r1[ok], r2[ok]
+            w = stratified_barycentric(samples, r1, r2)  # (n, k, 3)
+            if corners:
+                w = np.concatenate([w, np.broadcast_to(INSET, (len(w), 3, 3))], axis=1)
+            k = w.shape[1]
+            target = np.einsum("nkc,ncx->nkx", w, self.corners[t]).reshape(-1, 3)
+            o = np.repeat(eyes[e], k, axis=0)
+            d = target - o
+            ln = np.linalg.norm(d, axis=1)
+            good = ln > 0
+            d = d[good] / ln[good, None]
+            _, prims, cut = self.chain(o[good], d)
+            mine = np.zeros(self.T, bool)
+            mine[prims] = True
+            with lock:
+                np.logical_or(seen, mine, out=seen)
+                short[0] += cut
+
+        parallel(E * C, per, work, self.tracer.threads)
+        return seen, short[0]
+
+    # ------------------------------------------------------------------ the proof
+    @staticmethod
+    def cube_directions(pixels: int) -> np.ndarray:
+        """(6 P^2, 3) unit directions through the pixel centres of a cube map of side ``P``."""
+        P = int(pixels)
+        g = (np.arange(P) + 0.5) / P * 2.0 - 1.0
+        u, v = np.meshgrid(g, g, indexing="xy")
+        u, v = u.ravel(), v.ravel()
+        faces = []
+        for axis in range(3):
+            for sign in (1.0, -1.0):
+                f = np.zeros((P * P, 3))
+                f[:, axis] = sign
+                f[:, (axis + 1) % 3] = u
+                f[:, (axis + 2) % 3] = v
+                faces.append(f)
+        d = np.concatenate(faces)
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    @staticmethod
+    def view_directions(eye: np.ndarray, center: np.ndarray, radius: float, pixels: int) -> np.ndarray:
+        """(P^2, 3) unit directions through the pixel centres of a square pinhole view from ``eye``
+        at ``center`` whose field of view just holds the sphere (``center``, ``radius``)."""
+        P = int(pixels)
+        f = center - eye
+        dist = float(np.linalg.norm(f))
+        f = f / dist
+        a = np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        r = np.cross(a, f)
+        r /= np.linalg.norm(r)
+        u = np.cross(f, r)
+        s = radius / dist
+        half = s / np.sqrt(max(1.0 - s * s, 1e-12))  # tan of the sphere's angular radius
+        g = ((np.arange(P) + 0.5) / P * 2.0 - 1.0) * half
+        x, y = np.meshgrid(g, g, indexing="xy")
+        d = f[None, :] + x.ravel()[:, None] * r[None, :] + y.ravel()[:, None] * u[None, :]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def pixels(self, eyes: np.ndarray, views: list[np.ndarray], dropped: np.ndarray) -> dict:
+        """Pixel-centre rays ``views[i]`` (unit directions) from each eye ``eyes[i]``, through the
+        full mesh; a pixel is wrong when its ray draws a dropped triangle. Counts, and the dropped
+        triangles the held-out eyes saw."""
+        dropped = np.asarray(dropped, bool)
+        totals = {"wrong": 0, "covered": 0, "short": 0, "pixels": 0}
+        seen_dropped = np.zeros(self.T, bool)
+        lock = threading.Lock()
+
+        def work(a: int, b: int) -> None:
+            for i in range(a, b):  # one eye's view at a time: tens of thousands of rays each
+                d = views[i]
+                o = np.broadcast_to(eyes[i], d.shape)
+                rays, prims, cut = self.chain(np.ascontiguousarray(o), d)
+                bad = dropped[prims]
+                mine = np.zeros(self.T, bool)
+                mine[prims[bad]] = True
+                with lock:
+                    totals["wrong"] += int(len(np.unique(rays[bad])))
+                    totals["covered"] += int(len(np.unique(rays)))
+                    totals["short"] += cut
+                    totals["pixels"] += len(d)
+                    np.logical_or(seen_dropped, mine, out=seen_dropped)
+
+        parallel(len(eyes), 1, work, self.tracer.threads)
+        return {"pixels": totals["pixels"], "covered": totals["covered"], "wrong": totals["wrong"],
+                "cut_short": totals["short"], "dropped_seen": seen_dropped}
+
+    # ------------------------------------------------------------------ lighting
+    def surface_points(self, ids: np.ndarray, cell: float, max_level: int, samples: int, seed: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Points on the triangles ``ids``: their corners, the centroids of an ``m x m`` cut of each
+        (``m = ceil(longest edge / cell)``, at most ``max_level``: the lighting stage's interior
+        points) and ``samples`` stratified random points; ``(points, triangle of each)``."""
+        c = self.corners[ids]
+        longest = np.max(np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2), axis=1)
+        m = np.clip(np.ceil(longest / max(cell, 1e-300)), 1, max_level).astype(np.int64)
+        pts, owner = [c.reshape(-1, 3)], [np.repeat(ids, 3)]
+        for level in np.unique(m):
+            sel = m == level
+            i, j = np.meshgrid(np.arange(level), np.arange(level), indexing="ij")
+            ok = (i + j) < level
+            up = np.stack([(i[ok] + 1 / 3), (j[ok] + 1 / 3)], 1) / level  # upright sub-triangles
+            ok2 = (i + j) < level - 1
+            down = np.stack([(i[ok2] + 2 / 3), (j[ok2] + 2 / 3)], 1) / level  # the inverted ones
+            uv = np.concatenate([up, down])
+            w = np.stack([1 - uv.sum(1), uv[:, 0], uv[:, 1]], 1)
+            cs = c[sel]
+            pts.append(np.einsum("kc,ncx->nkx", w, cs).reshape(-1, 3))
+            owner.append(np.repeat(ids[sel], len(w)))
+        rng = np.random.default_rng([seed, 7])
+        w = stratified_barycentric(samples, rng.random(len(ids)), rng.random(len(ids)))
+        pts.append(np.einsum("nkc,ncx->nkx", w, c).reshape(-1, 3))
+        owner.append(np.repeat(ids, samples))
+        return np.concatenate(pts), np.concatenate(owner)
+
+    def casters(self, points: np.ndarray, owner: np.ndarray, directions: list[np.ndarray],
+                lights: list[np.ndarray], hemisphere: int, seed: int) -> np.ndarray:
+        """(T,) bool: the triangles first hit by rays from ``points`` (on the triangles ``owner``,
+        from each side a triangle is drawn from) towards every direction (unit, towards a light),
+        every light position (up to it) and over ``hemisphere`` cosine-weighted directions."""
+        out = np.zeros(self.T, bool)
+        if len(points) == 0:
+            return out
+        rng = np.random.default_rng([seed, 8])
+        nrm = self.normal[owner]
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+        sides = [(points, nrm)]
+        back = self.two_sided[owner]
+        if back.any():
+            sides.append((points[back], -nrm[back]))
+        for q, n in sides:
+            loc = self.tracer.to_local(q)
+            lo = loc + self.tracer.epsilon(loc)[:, None] * n
+            jobs: list[tuple[np.ndarray, np.ndarray | None]] = []
+            for d in directions:
+                jobs.append((np.ascontiguousarray(np.broadcast_to(np.asarray(d, np.float64), n.shape)), None))
+            for lp in lights:
+                dd = self.tracer.to_local(np.asarray(lp, np.float64)[None, :]) - lo
+                ln = np.linalg.norm(dd, axis=1)
+                jobs.append((dd / np.maximum(ln, 1e-300)[:, None], ln))
+            for _ in range(hemisphere):
+                jobs.append((self._cosine(n, rng.random(len(q)), rng.random(len(q))), None))
+            for d, ln in jobs:
+                facing = np.einsum("ij,ij->i", d, n) > 0
+                h = self.tracer.intersect(lo[facing].astype(np.float32), d[facing].astype(np.float32),
+                                          dist=None if ln is None else ln[facing])
+                self.rays += int(facing.sum())
+                prim = np.asarray(h["prim"], np.int64)
+                out[prim[(prim >= 0) & (prim < self.T)]] = True
+        return out
+
+    @staticmethod
+    def _cosine(n: np.ndarray, r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
+        a = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+        t = np.cross(n, a)
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        b = np.cross(n, t)
+        s, phi = np.sqrt(r1), 2 * np.pi * r2
+        z = np.sqrt(np.clip(1 - r1, 0, 1))
+        return (s * np.cos(phi))[:, None] * t + (s * np.sin(phi))[:, None] * b + z[:, None] * n
+
+
+__all__ = ["Visibility", "stratified_barycentric", "MAX_CHAIN"]

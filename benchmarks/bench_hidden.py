@@ -1,0 +1,146 @@
+"""The hidden-geometry stage (``[mesh.hidden]``, docs/hidden.md) on corpus models.
+
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_hidden.py [--models suzanne,teapot] [--holdout 200]
+        [--out benchmarks/results/hidden.json]
+
+Per model, on the scene as cleaned (the stage's input in a bake): triangles before and after,
+the bytes the lists add to project.json with the stage off and on (the export stage's own figure,
+``project_json_bytes``), the held-out proof (``--holdout`` eyes not used to decide, a pixel grid
+each: wrong pixels, pixels showing the model), the stage's seconds (deciding, and the proof), and
+against them the seconds of a 64-sample AO bake of the same scene (the lighting stage with AO
+alone, ``target = "vertex"``; the issue's cost bound). Suzanne is also built into a BSP tree with
+the stage off, on, and on with ``trim = true`` (split inflation, triangles written), and decided again with seeds 0 to 7 (each with its own
+held-out eyes: the wrong pixels per seed). The Cornell box is seen from an inside box region (the
+middle 60% of the room), the rest from outside. Single runs on a shared 2-core machine: the CPU
+seconds are given beside the wall seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
+
+MODELS = {
+    "suzanne": ("suzanne_obj/suzanne.obj", "outside"),
+    "teapot": ("teapot_obj/teapot.obj", "outside"),
+    "spot": ("spot_triangulated/spot/spot_triangulated.obj", "outside"),
+    "bunny": ("stanford_bunny_res1_obj/stanford-bunny.obj", "outside"),
+    "duck": ("duck_glb/Duck.glb", "outside"),
+    "subpass_scene": ("subpass_scene/subpass_scene_opaque.gltf", "outside"),
+    "three_story_building": ("three_story_building_noindices/no_indices_3storybuilding.glb", "outside"),
+    "cornell_box": ("cornell_box_tinyobj/cornell_box.obj", "inside"),
+}
+
+
+def timed(fn):
+    t, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - t, time.process_time() - c
+
+
+def list_bytes(res) -> int:
+    ex = next(r for r in res.records if r.name == "export")
+    return int(sum(v["project_json_bytes"] for v in ex.details["lists"].values()))
+
+
+def run_model(key: str, holdout: int) -> dict:
+    from bake import pipeline
+    from bake.config import AOConfig, LightingConfig
+    from bake.lighting.stage import stage as lighting_stage
+    from bake.mesh.hidden.stage import job, stage as hidden_stage
+
+    rel, region = MODELS[key]
+    path = CORPUS / rel
+    base = ["export.sb3=false", "export.sprite3=false", "export.reader=false"]
+    cfg = pipeline.load_config_for(path, base)
+    cleaned = pipeline.run(cfg, until="clean", cache=None).scene
+    sets = ["mesh.hidden.enabled=true", f"mesh.hidden.holdout_eyes={holdout}"]
+    if region == "inside":
+        lo, hi = cleaned.bounds()
+        a, b = lo + 0.2 * (hi - lo), hi - 0.2 * (hi - lo)
+        sets += ["mesh.hidden.outside=false",
+                 f"mesh.hidden.boxes=[{{min = {[float(x) for x in a]}, max = {[float(x) for x in b]}}}]"]
+    on = pipeline.load_config_for(path, base + sets)
+    (out, rec), wall, cpu = timed(lambda: hidden_stage(cleaned, job(on)))
+    d = rec.details
+    ao_cfg = LightingConfig(enabled=True, ambient=[1.0, 1.0, 1.0], ao=AOConfig(enabled=True, samples=64))
+    _, ao_wall, ao_cpu = timed(lambda: lighting_stage(cleaned, ao_cfg))
+    bytes_off = list_bytes(pipeline.run(cfg, cache=None))
+    bytes_on = list_bytes(pipeline.run(on, cache=None))
+    h = d["holdout"]
+    row = {
+        "model": key, "file": rel, "region": region,
+        "triangles_in": rec.counts_in["triangles"], "triangles_out": rec.counts_out["triangles"],
+        "dropped": d["dropped"], "dropped_share": d["dropped"] / max(rec.counts_in["triangles"], 1),
+        "bytes_off": bytes_off, "bytes_on": bytes_on, "bytes_saved": bytes_off - bytes_on,
+        "holdout_eyes": h["eyes"], "holdout_pixels": h["pixels"], "pixels_showing": h["pixels_showing_the_model"],
+        "wrong_pixels": h["wrong_pixels"], "dropped_seen_by_holdout": h["dropped_triangles_seen"],
+        "decide_rays": d["rays"], "decide_seconds": d["decide_seconds"], "proof_seconds": h["seconds"],
+        "stage_seconds": round(wall, 4), "stage_cpu_seconds": round(cpu, 4),
+        "ao64_seconds": round(ao_wall, 4), "ao64_cpu_seconds": round(ao_cpu, 4),
+        "decide_over_ao64": round(d["decide_seconds"] / max(ao_wall, 1e-9), 3),
+        "rounds": d["rounds"],
+    }
+    if key == "suzanne":
+        bsp = {}
+        n_model = rec.counts_in["triangles"]
+        for name, extra in (("off", None), ("on", sets), ("on, trim = true", sets + ["mesh.hidden.trim=true"])):
+            c2 = pipeline.load_config_for(path, base + (extra or []) + ["bsp.enabled=true"])
+            res = pipeline.run(c2, cache=None)
+            b = next(r for r in res.records if r.name == "bsp")
+            bsp[name] = {"triangles_in": b.counts_in["triangles"], "triangles_out": b.counts_out["triangles"],
+                         "inflation": round(b.accuracy["inflation"], 4),
+                         "out_vs_model": round(b.counts_out["triangles"] / n_model - 1.0, 4)}
+            h = next((r for r in res.records if r.name == "hidden"), None)
+            if h is not None:
+                hh = h.details["holdout"]
+                bsp[name].update({"hidden_seconds": round(h.seconds, 4), "wrong_pixels": hh["wrong_pixels"],
+                                  "pixels_showing": hh["pixels_showing_the_model"], "holdout_eyes": hh["eyes"],
+                                  "trim": h.details.get("trim")})
+        row["bsp"] = bsp
+        # the same with other seeds: how often the held-out eyes find a dropped triangle
+        row["seeds"] = []
+        for seed in range(8):
+            c2 = pipeline.load_config_for(path, base + sets + [f"mesh.hidden.seed={seed}"])
+            _, r2 = hidden_stage(cleaned, job(c2))
+            row["seeds"].append({"seed": seed, "dropped": r2.details["dropped"],
+                                 "wrong_pixels": r2.details["holdout"]["wrong_pixels"],
+                                 "pixels_showing": r2.details["holdout"]["pixels_showing_the_model"],
+                                 "dropped_seen_by_holdout": r2.details["holdout"]["dropped_triangles_seen"]})
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--models", default=",".join(MODELS))
+    ap.add_argument("--holdout", type=int, default=200)
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "hidden.json"))
+    a = ap.parse_args()
+    rows = []
+    for key in [m for m in a.models.split(",") if m]:
+        if not (CORPUS / MODELS[key][0]).exists():
+            print(f"{key}: not in the corpus, skipped")
+            continue
+        row = run_model(key, a.holdout)
+        rows.append(row)
+        print(f"{key}: {row['triangles_in']:,} -> {row['triangles_out']:,} triangles, {row['bytes_saved']:,} bytes "
+              f"saved, {row['wrong_pixels']} wrong of {row['pixels_showing']:,} pixels from {row['holdout_eyes']} "
+              f"held-out eyes; decide {row['decide_seconds']:.2f} s, AO-64 {row['ao64_seconds']:.2f} s", flush=True)
+    doc = {"command": "benchmarks/bench_hidden.py " + f"--holdout {a.holdout}",
+           "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+                       "load_before": os.getloadavg()[0]},
+           "defaults": {"eyes": 64, "samples": 2, "refine": 8, "refine_rounds": 3, "holdout_pixels": 64},
+           "models": {r["model"]: r for r in rows}, "rows": rows}
+    Path(a.out).write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()

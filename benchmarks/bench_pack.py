@@ -57,9 +57,11 @@ LIT = {"enabled": True, "ambient": [0.3, 0.3, 0.33],
 
 
 def models(quick: bool) -> dict[str, dict]:
-    bunny2k = config.load(REPO / "configs" / "bunny.toml", ["mesh.simplify.target_triangles=2000"])
+    bunny2k_sets = ["mesh.simplify.target_triangles=2000"]
+    bunny2k = config.load(REPO / "configs" / "bunny.toml", bunny2k_sets)
     out = {
-        "bunny2k": {"label": "bunny 2k, lit, BSP", "config": bunny2k},
+        "bunny2k": {"label": "bunny 2k, lit, BSP", "config": bunny2k,
+                    "recipe": {"path": str(REPO / "configs" / "bunny.toml"), "sets": bunny2k_sets}},
         "teapot": {"label": "teapot, lit, BSP", "config": config.load(data={
             "input": {"path": str(CORPUS / "teapot_obj" / "teapot.obj")}, "transform": {"fit": 100},
             "lighting": LIT, "bsp": {"enabled": True}})},
@@ -68,7 +70,7 @@ def models(quick: bool) -> dict[str, dict]:
     }
     if not quick:
         b69 = {"input": {"path": str(BUNNY)}, "transform": {"center": "base", "fit": 100}, "lighting": LIT}
-        out["bunny69k"] = {"label": "bunny 69k, lit", "config": config.load(data=b69)}
+        out["bunny69k"] = {"label": "bunny 69k, lit", "config": config.load(data=b69), "recipe": {"data": b69}}
         out["bunny69k_bsp"] = {"label": "bunny 69k, lit, BSP", "config": config.load(data={**b69, "bsp": {"enabled": True}})}
     return out
 
@@ -153,28 +155,36 @@ def project_split(sb3_path: Path, tris: int) -> dict:
 
 
 BASELINE_SCRIPT = """
-import json, sys, pickle
+import dataclasses, json, sys
 from pathlib import Path
-from bake import pipeline
-cfg = pickle.loads(Path(sys.argv[1]).read_bytes())
+from bake import config, pipeline
+recipe = json.loads(Path(sys.argv[1]).read_text())
+if "path" in recipe:
+    cfg = config.load(Path(recipe["path"]), recipe["sets"])
+else:
+    cfg = config.load(data=recipe["data"])
+cfg.export = dataclasses.replace(cfg.export, **recipe["export"])
 res = pipeline.run(cfg)
 files = res.scene.artefacts.outputs
 name = next(n for n in files if n.endswith(".sb3"))
 Path(sys.argv[2]).write_bytes(files[name])
+lists = json.loads(files["lists.json"])["lists"]
+Path(sys.argv[2] + ".json").write_text(json.dumps({"triangles": len(lists["tris"]) // 4}))
 """
 
 
-def bake_with_tree(tree: Path, cfg, out: Path) -> Path:
-    """The .sb3 another checkout bakes from this config (pickled across), at ``out``."""
-    import pickle
-
-    cfg_file = out.with_suffix(".cfg.pickle")
-    cfg_file.write_bytes(pickle.dumps(cfg))
+def bake_with_tree(tree: Path, recipe: dict, out: Path) -> tuple[Path, int]:
+    """The .sb3 another checkout bakes, at ``out``, from a config it loads itself from ``recipe``
+    (a config file and its --set overrides, or the config's data, then ``export`` fields replaced):
+    an older checkout may not know this one's config classes, so no config object goes across.
+    With the triangles it wrote (its BSP may split others than this checkout's)."""
+    cfg_file = out.with_suffix(".recipe.json")
+    cfg_file.write_text(json.dumps(recipe))
     r = subprocess.run([sys.executable, "-c", BASELINE_SCRIPT, str(cfg_file), str(out)], cwd=str(tree),
                        env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True, timeout=3600)
     if r.returncode != 0:
         raise SystemExit(f"baseline bake with {tree} failed: {r.stderr[-2000:]}")
-    return out
+    return out, int(json.loads(Path(str(out) + ".json").read_text())["triangles"])
 
 
 # --------------------------------------------------------------------------- ideas
@@ -368,10 +378,9 @@ def main() -> None:
     if args.baseline:
         for key in ("bunny2k", "bunny69k"):
             if key in baked:
-                cfg = with_export(models(args.quick)[key]["config"], pack=True, pack_max_items=0)
-                f = bake_with_tree(args.baseline.resolve(), cfg, tmp / key / "baseline.sb3")
+                recipe = {**models(args.quick)[key]["recipe"], "export": {"pack": True, "pack_max_items": 0}}
+                f, T = bake_with_tree(args.baseline.resolve(), recipe, tmp / key / "baseline.sb3")
                 baseline[key] = f
-                T = result["models"][key]["triangles"]
                 result.setdefault("baseline", {"tree": str(args.baseline), "models": {}})
                 commit = subprocess.run(["git", "-C", str(args.baseline), "rev-parse", "--short", "HEAD"],
                                         capture_output=True, text=True).stdout.strip()
@@ -422,7 +431,9 @@ def main() -> None:
                 result["turbowarp_versions"] = run.versions
                 for r in run.results:
                     secs = [x["stepSeconds"] for x in r.runs]
-                    lossless = all(same_items(r.lists.get(n, []), items) for n, items in baked[k][1]["lists"].items())
+                    # (the baseline's own lists are not at hand: another checkout may write others)
+                    lossless = None if "@" in r.id else all(same_items(r.lists.get(n, []), items)
+                                                            for n, items in baked[k][1]["lists"].items())
                     where = result["models"][r.id] if "@" not in r.id else result["baseline"]["models"][k]
                     where.setdefault("turbowarp", {})[r.mode] = {
                         "seconds": [round(s, 4) for s in secs], "median": round(float(np.median(secs)), 4),
@@ -443,7 +454,7 @@ def main() -> None:
             label = {"plain": f"{m['label']}: plain", "packed": f"{m['label']}: packed",
                      "baseline": f"{m['label']}: packed at {result['baseline']['commit']} (before)"
                      if kind == "baseline" else ""}[kind]
-            rows[f"{key} {kind}"] = {"bake": label, "triangles": m["triangles"], **split["per_tri"],
+            rows[f"{key} {kind}"] = {"bake": label, "triangles": split["written_triangles"], **split["per_tri"],
                                      "bytes": split["bytes"]["total"],
                                      "blocks_per_tri": round(split["per_tri"]["loader_blocks"]
                                                              + split["per_tri"]["reader_blocks"], 3),

@@ -104,19 +104,9 @@ def tri_two_sided(scene: Scene) -> np.ndarray:
     return two_mat[np.clip(scene.tri_material, 0, len(two_mat) - 1)]
 
 
-def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True):
-    """Everything but writing the scene: (store, sources, tree, encoded, frame), in one go (the
-    stage itself goes through :func:`grow` and :func:`complete`, which give the same result).
-
-    With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
-    they will be written: input positions rounded, every vertex a cut makes snapped to the grid,
-    a cut whose snapped pieces would be collapsed, flipped or tilted not made, triangles that
-    rounding collapses left out, and the on-plane tolerance at least a grid step.
-
-    ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
-    from (:class:`bake.bsp.split.Tape`; the result is the same either way: the corner ids it adds
-    decide neither a merge nor a re-merge). ``remerge_fragments``: join coplanar fragments drawn
-    together again (:func:`bake.bsp.remerge.remerge`)."""
+def _tree(scene: Scene, opt: BuildOptions, merge: bool, tape: bool, remerge_fragments: bool):
+    """The source faces, the tree built on them and re-merged: (store, src, tree, (center,
+    scale), options with the tree's tolerance), what :func:`build` and :func:`grow` share."""
     center, scale = frame(scene)
     opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
     src, two, ch = merged(scene, opt, merge, tape)
@@ -133,6 +123,23 @@ def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = Fals
         groups, shown = remerge_groups(scene, src, two, store.A, ch)
         tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
         tree.stats["remerge_seconds"] = time.perf_counter() - t
+    return store, src, tree, (center, scale), opt
+
+
+def build(scene: Scene, opt: BuildOptions, merge: bool = True, tape: bool = False, remerge_fragments: bool = True):
+    """Everything but writing the scene: (store, sources, tree, encoded, frame), in one go (the
+    stage itself goes through :func:`grow` and :func:`complete`, which give the same result).
+
+    With a grid on the scene (``scene.position_decimals``) the tree is built on the positions as
+    they will be written: input positions rounded, every vertex a cut makes snapped to the grid,
+    a cut whose snapped pieces would be collapsed, flipped or tilted not made, triangles that
+    rounding collapses left out, and the on-plane tolerance at least a grid step.
+
+    ``tape``: with vertex colours, ``store.tape`` records where every cut corner's attributes came
+    from (:class:`bake.bsp.split.Tape`; the result is the same either way: the corner ids it adds
+    decide neither a merge nor a re-merge). ``remerge_fragments``: join coplanar fragments drawn
+    together again (:func:`bake.bsp.remerge.remerge`)."""
+    store, src, tree, (center, scale), _ = _tree(scene, opt, merge, tape, remerge_fragments)
     frag_tris = fragment_triangles(store, src)
     enc = encode(tree, frag_tris)
     return store, src, tree, enc, (center, scale)
@@ -448,22 +455,7 @@ def grow(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool =
     (:class:`bake.bsp.split.Tape`), from which :func:`complete` computes every cut corner's colour
     for the colours of the bake at hand."""
     t0 = time.perf_counter()
-    center, scale = frame(scene)
-    opt = dataclasses.replace(opt, epsilon=tolerance(scene, opt))
-    src, two, ch = merged(scene, opt, merge, tape=True)
-    plane, degen = face_planes(src.pos, src.count, opt.min_area)
-    first_tri = src.tri_list[src.tri_start[:-1]]
-    store = FaceStore(src.pos, src.count, src.attr, src.vid, plane, degen, two[first_tri])
-    if ch is not None:
-        store.tape = Tape(ch, src.n_input_corners)
-    if scene.position_decimals is not None:
-        store.grid = (center, scale, scene.position_decimals)
-    tree = build_tree(store, opt, center, scale)
-    if remerge_fragments:
-        t = time.perf_counter()
-        groups, shown = remerge_groups(scene, src, two, store.A, ch)
-        tree.stats.update(remerge(store, tree, groups, opt.epsilon, opt.min_area, shown=shown))
-        tree.stats["remerge_seconds"] = time.perf_counter() - t
+    store, src, tree, (center, scale), opt = _tree(scene, opt, merge, True, remerge_fragments)
     t_cross = time.perf_counter()
     # parts that pass through each other: cuts no tree avoids (bake/bsp/crossing.py)
     crossed = crossing.summary(written_positions(scene), scene.triangles, opt.epsilon * scale)
@@ -555,8 +547,6 @@ def complete(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bo
             "tolerance": tol, "epsilon": opt.epsilon, "counts_out": counts_out,
             "inflation": T_out / T_in - 1.0, "details": details, "warnings": warnings,
             "seconds": float(grown["seconds"]) + time.perf_counter() - t0}
-
-
 
 
 def make(scene: Scene, opt: BuildOptions, merge: bool, remerge_fragments: bool = True) -> dict:

@@ -481,6 +481,17 @@ def _camera_blocks(r: ReaderBuilder) -> None:
 
 
 # ---- the frame
+def _triangle_and_material(m: Any, walk: str, b: Any) -> tuple[Any, Any]:
+    """The filler's triangle number and its material (reporters) when ``_b`` (``b``) stands at
+    corner c's item (book, soup) or is the triangle (split): see :func:`_fill_blocks`."""
+    if walk == "book":
+        return div(add(b, 1), 4), _index(m, item(add(b, 1), m.tris))
+    if walk == "split":
+        return b, _index(m, item(b, m.tris[3]))
+    t = div(b, 3)
+    return t, _index(m, item(t, m.tris))
+
+
 def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     """Fill the triangle whose ``tris`` items start at item ``_b`` (see the module docstring;
     :func:`_triangle_walk` for the other layouts). ``check_usable``: the blocks for an unsafe
@@ -515,13 +526,7 @@ def _fill_blocks(r: ReaderBuilder, check_usable: bool = True) -> list[B.Node]:
     def cy():
         return item(point(3), py)
 
-    if walk == "book":
-        t, material = div(add(b, 1), 4), _index(m, item(add(b, 1), m.tris))
-    elif walk == "split":
-        t, material = b, _index(m, item(b, m.tris[3]))
-    else:
-        t = div(b, 3)
-        material = _index(m, item(t, m.tris))
+    t, material = _triangle_and_material(m, walk, b)
     # faces the camera: ((bx-ax)*(cy-ay)) - ((by-ay)*(cx-ax)) < 0, i.e. the first product is the
     # smaller (a difference of doubles is negative exactly when the first is smaller)
     first, second = mul(sub(bx, ax), sub(cy(), ay)), mul(sub(by, ay), sub(cx(), ax))
@@ -600,13 +605,7 @@ def _textured_fill_blocks(r: ReaderBuilder) -> list[B.Node]:
         load += [r.set(f"_{name}x", item(point, px)), r.set(f"_{name}y", item(point, py))]
         if k < 3 and walk != "split":
             load.append(r.change("_b", 1))
-    if walk == "book":
-        t, material = div(add(b, 1), 4), _index(m, item(add(b, 1), m.tris))
-    elif walk == "split":
-        t, material = b, _index(m, item(b, m.tris[3]))
-    else:
-        t = div(b, 3)
-        material = _index(m, item(t, m.tris))
+    t, material = _triangle_and_material(m, walk, b)
     load.append(r.set("_a", sub(mul(sub(bx, ax), sub(cy, ay)), mul(sub(by, ay), sub(cx, ax)))))
     if _two_sided(r.spec):
         two = r.lst(m.two_sided, [int(x) for x in r.spec.two_sided])

@@ -68,9 +68,10 @@ def test_any_colours_reuse_the_tree_and_give_the_cold_bytes():
 
 
 def test_joined_pieces_show_their_triangles_colours():
-    """The re-merge joins pieces of one input triangle only: every output triangle's vertex colours
-    are its source triangle's affine colours (the decorated scene's are affine over the whole
-    model, so also made noisy per triangle here), and its face colour its source triangle's."""
+    """The re-merge joins pieces of one input triangle only: with face colours made different per
+    input triangle, every output triangle's face colour is its source triangle's, and every output
+    triangle lies inside its source triangle. (The cut corners' vertex colours against a build
+    with the colours from the start: test_any_colours_reuse_the_tree_and_give_the_cold_bytes.)"""
     scene, _ = _decorated(interlocked_scene())
     rng = np.random.default_rng(3)
     # per-corner colours cannot be noisy per triangle with shared vertices: noisy face colours

@@ -40,7 +40,6 @@ from ...errors import ConfigError
 from ...record import ReportSection, StageRecord
 from ...scene import Material, Scene
 from ..clean import unique_rows
-from . import enclosed as enclosed_mod
 from . import regions as regions_mod
 from . import trim as trim_mod
 from .visibility import Visibility
@@ -189,7 +188,6 @@ def _lights(scene: Scene, lighting: LightingConfig, rng: np.random.Generator
     return dirs, pts, bool(plan.ao or plan.sky or plan.bounces)
 
 
-ENCLOSED_TOL = 1e-6  # a triangle's box grown by this x the diagonal must miss an enclosing shell's
 TRIM_EPS = 1e-6  # trimming: a corner this close to a cutting plane (x the diagonal) is on it
 TRIM_MIN_AREA = 1e-12  # pieces smaller than this x the diagonal squared are left out
 FIXED = ("point", "camera")  # regions of one eye
@@ -246,16 +244,8 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     rounds = [{"eyes": int(len(eyes)), "candidates": T, "seen": int(seen.sum())}]
     fresh = seen.copy()
     corners = corner_ids(pos, scene.triangles)
-    # the unseen triangles inside a closed, opaque, two-sided part: no outside eye sees them (a
-    # proof, not a sample), so the rounds do not aim at them
-    enclosed = np.zeros(T, bool)
-    enclosed_info: dict[str, Any] | None = None
-    if cfg.refine > 0 and cfg.refine_rounds > 0 and all(g.kind == "outside" for g in regs) and not seen.all():
-        t_enc = time.perf_counter()
-        enclosed, enclosed_info = enclosed_mod.enclosed(vis, corners, np.flatnonzero(~seen), ENCLOSED_TOL * scene.scale())
-        enclosed_info["seconds"] = round(time.perf_counter() - t_enc, 6)
     for r in range(cfg.refine_rounds if cfg.refine > 0 else 0):
-        cand = np.flatnonzero(neighbours(corners, fresh) & ~seen & ~enclosed)
+        cand = np.flatnonzero(neighbours(corners, fresh) & ~seen)
         if len(cand) == 0:
             break
         # sampled regions (outside, boxes) get refine x more eyes; an eye at a point refine x more rays
@@ -340,7 +330,7 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         "vertices_dropped": original.n_vertices - out.n_vertices,
         "see_through_triangles": int(clear.sum()), "see_through_materials": clear_names,
         "two_sided_triangles": int(sided.sum()), "back_faces": cfg.back_faces,
-        "rays": decide_rays, "cut_short": short, "enclosed": enclosed_info, "decide_seconds": round(decide_seconds, 6),
+        "rays": decide_rays, "cut_short": short, "decide_seconds": round(decide_seconds, 6),
         # a triangle seen from a share p of the (eye, point) pairs of the first pass is missed by it
         # with probability at most (1 - p)^n (independent pairs; stratification only lowers it)
         "pairs_per_triangle": n_per,

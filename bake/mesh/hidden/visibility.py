@@ -127,6 +127,14 @@ class Visibility:
         short = [0]
         if E == 0 or C == 0:
             return seen, 0
+        # the random numbers: one generator per CHUNK_RAYS rays of pairs, as drawn up front; the
+        # work goes in smaller items (DECIDE_CHUNK_RAYS: both threads busy on a small batch)
+        rng_per = max(1, CHUNK_RAYS // (samples + 3 * corners))
+        R1, R2 = np.empty(E * C), np.empty(E * C)
+        for s0 in range(0, E * C, rng_per):
+            rng = np.random.default_rng([seed, stream, s0 // rng_per])
+            n = min(E * C, s0 + rng_per) - s0
+            R1[s0:s0 + n], R2[s0:s0 + n] = rng.random(n), rng.random(n)
         per = max(1, DECIDE_CHUNK_RAYS // (samples + 3 * corners))
         lock = threading.Lock()
         # the candidates' corners, normals and sidedness gathered once per batch, not once per ray
@@ -135,10 +143,9 @@ class Visibility:
         cin = np.einsum("kc,ncx->nkx", INSET, cc) if corners else None
 
         def work(a: int, b: int) -> None:
-            rng = np.random.default_rng([seed, stream, a // per])
             q = np.arange(a, b)
             e, j = q // C, q % C
-            r1, r2 = rng.random(len(q)), rng.random(len(q))
+            r1, r2 = R1[a:b], R2[a:b]
             rel = eyes[e] - c0[j]
             ok = np.flatnonzero((np.einsum("ij,ij->i", cn[j], rel) > 0) | c2[j])
             e, j, r1, r2 = e[ok], j[ok], r1[ok], r2[ok]

@@ -10,7 +10,8 @@ each: wrong pixels, pixels showing the model), the stage's seconds (deciding, an
 against them the seconds of a 64-sample AO bake of the same scene (the lighting stage with AO
 alone, ``target = "vertex"``; the issue's cost bound). Suzanne is also built into a BSP tree with
 the stage off, on, and on with ``trim = true`` (split inflation, triangles written), and decided again with seeds 0 to 7 (each with its own
-held-out eyes: the wrong pixels per seed). The Cornell box is seen from an inside box region (the
+held-out eyes: the wrong pixels per seed). The subpass scene is decided again with ``refine`` 0, 2, 4
+and 8 (the cost's floor: what fewer refinement eyes cost and what they miss). The Cornell box is seen from an inside box region (the
 middle 60% of the room), the rest from outside. Single runs on a shared 2-core machine: the CPU
 seconds are given beside the wall seconds.
 """
@@ -88,6 +89,18 @@ def run_model(key: str, holdout: int) -> dict:
         "decide_over_ao64": round(d["decide_seconds"] / max(ao_wall, 1e-9), 3),
         "rounds": d["rounds"],
     }
+    if key == "subpass_scene":
+        # the floor of the cost (issue 42): fewer refinement eyes, what they cost and what they miss
+        row["refine_sweep"] = []
+        for refine in (0, 2, 4, 8):
+            c2 = pipeline.load_config_for(path, base + sets + [f"mesh.hidden.refine={refine}"])
+            _, r2 = hidden_stage(cleaned, job(c2))
+            row["refine_sweep"].append({
+                "refine": refine, "eyes_a_round": r2.details["rounds"][-1]["eyes"] if refine else 0,
+                "decide_rays": r2.details["rays"], "decide_seconds": r2.details["decide_seconds"],
+                "decide_over_ao64": round(r2.details["decide_seconds"] / max(ao_wall, 1e-9), 3),
+                "dropped": r2.details["dropped"], "wrong_pixels": r2.details["holdout"]["wrong_pixels"],
+                "dropped_seen_by_holdout": r2.details["holdout"]["dropped_triangles_seen"]})
     if key == "suzanne":
         bsp = {}
         n_model = rec.counts_in["triangles"]

@@ -314,6 +314,25 @@ def test_deterministic_for_any_thread_count():
     assert d.n_triangles > 0
 
 
+def test_work_item_size_changes_nothing(monkeypatch):
+    # the random numbers belong to fixed generator chunks (CHUNK_RAYS), not to the work items the
+    # threads take (DECIDE_CHUNK_RAYS): items of any size give the same rays, so the same answer
+    from bake.mesh.hidden import visibility
+
+    rng = np.random.default_rng(3)
+    s = scene_of(*[box(c - 0.4, c + 0.4) for c in rng.uniform(-1, 1, (12, 3))])
+    outs = []
+    for size in (1 << 6, 1 << 11, visibility.CHUNK_RAYS * 4):
+        monkeypatch.setattr(visibility, "DECIDE_CHUNK_RAYS", size)
+        out, rec = run(s, threads=2)
+        outs.append((out, rec.details["rounds"], rec.details["rays"]))
+    assert outs[0][0].n_triangles < s.n_triangles  # something is hidden: the rounds do work
+    for out, rounds, rays in outs[1:]:
+        assert np.array_equal(out.positions, outs[0][0].positions)
+        assert np.array_equal(out.triangles, outs[0][0].triangles)
+        assert rounds == outs[0][1] and rays == outs[0][2]
+
+
 def test_polygons_and_attributes_follow_the_kept_triangles():
     outer = box([-1, -1, -1], [1, 1, 1])
     inner = box([-0.3, -0.3, -0.3], [0.3, 0.3, 0.3])

@@ -34,6 +34,7 @@ MAX_CHAIN = 64  # continuations through see-through and culled triangles, per ra
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 CORNER_INSET = 1e-3
 MIN_BATCH_RAYS = 1 << 15  # a batch of eyes aims at least this many rays (the calls' overhead)
+DECIDE_CHUNK_RAYS = 1 << 14  # rays per work item while deciding: a batch of MIN_BATCH_RAYS is 2 items (2 threads)
 INSET = (1.0 - 1.5 * CORNER_INSET) * np.eye(3) + 0.5 * CORNER_INSET  # barycentrics just inside the corners
 
 
@@ -79,14 +80,14 @@ class Visibility:
             h = self.tracer.intersect(start.astype(np.float32), d.astype(np.float32))
             casts += len(idx)
             prim = np.asarray(h["prim"], np.int64)
-            hit = (prim >= 0) & (prim < self.T)
-            idx, start, d, prim = idx[hit], start[hit], d[hit], prim[hit]
-            t = np.asarray(h["t"], np.float64)[hit]
-            drawn = (np.einsum("ij,ij->i", self.normal[prim], d) < 0) | self.two_sided[prim]
-            rays_out.append(idx[drawn])
+            hit = np.flatnonzero((prim >= 0) & (prim < self.T))
+            prim, dh = prim[hit], d[hit]
+            drawn = (np.einsum("ij,ij->i", self.normal[prim], dh) < 0) | self.two_sided[prim]
+            rays_out.append(idx[hit[drawn]])
             prims_out.append(prim[drawn])
-            go = ~drawn | self.see_through[prim]
-            idx, start, d, t = idx[go], start[go], d[go], t[go]
+            go = hit[~drawn | self.see_through[prim]]  # the rays that go on (few: culled, see-through)
+            idx, start, d = idx[go], start[go], d[go]
+            t = np.asarray(h["t"], np.float64)[go]
             at = start + t[:, None] * d
             start = at + self.tracer.epsilon(at)[:, None] * d
         with self._lock:
@@ -126,22 +127,34 @@ class Visibility:
         short = [0]
         if E == 0 or C == 0:
             return seen, 0
-        per = max(1, CHUNK_RAYS // (samples + 3 * corners))
+        # the random numbers: one generator per CHUNK_RAYS rays of pairs, as drawn up front; the
+        # work goes in smaller items (DECIDE_CHUNK_RAYS: both threads busy on a small batch)
+        rng_per = max(1, CHUNK_RAYS // (samples + 3 * corners))
+        R1, R2 = np.empty(E * C), np.empty(E * C)
+        for s0 in range(0, E * C, rng_per):
+            rng = np.random.default_rng([seed, stream, s0 // rng_per])
+            n = min(E * C, s0 + rng_per) - s0
+            R1[s0:s0 + n], R2[s0:s0 + n] = rng.random(n), rng.random(n)
+        per = max(1, DECIDE_CHUNK_RAYS // (samples + 3 * corners))
         lock = threading.Lock()
+        # the candidates' corners, normals and sidedness gathered once per batch, not once per ray
+        cc = self.corners[cand]
+        c0, cn, c2 = np.ascontiguousarray(cc[:, 0]), self.normal[cand], self.two_sided[cand]
+        cin = np.einsum("kc,ncx->nkx", INSET, cc) if corners else None
 
         def work(a: int, b: int) -> None:
-            rng = np.random.default_rng([seed, stream, a // per])
             q = np.arange(a, b)
-            e, t = q // C, cand[q % C]
-            r1, r2 = rng.random(len(q)), rng.random(len(q))
-            rel = eyes[e] - self.corners[t, 0]
-            ok = (np.einsum("ij,ij->i", self.normal[t], rel) > 0) | self.two_sided[t]
-            e, t, r1, r2 = e[ok], t[ok], r1[ok], r2[ok]
+            e, j = q // C, q % C
+            r1, r2 = R1[a:b], R2[a:b]
+            rel = eyes[e] - c0[j]
+            ok = np.flatnonzero((np.einsum("ij,ij->i", cn[j], rel) > 0) | c2[j])
+            e, j, r1, r2 = e[ok], j[ok], r1[ok], r2[ok]
             w = stratified_barycentric(samples, r1, r2)  # (n, k, 3)
+            target = np.einsum("nkc,ncx->nkx", w, cc[j])
             if corners:
-                w = np.concatenate([w, np.broadcast_to(INSET, (len(w), 3, 3))], axis=1)
-            k = w.shape[1]
-            target = np.einsum("nkc,ncx->nkx", w, self.corners[t]).reshape(-1, 3)
+                target = np.concatenate([target, cin[j]], axis=1)
+            k = target.shape[1]
+            target = target.reshape(-1, 3)
             o = np.repeat(eyes[e], k, axis=0)
             d = target - o
             ln = np.linalg.norm(d, axis=1)

@@ -9,8 +9,11 @@ the bytes the lists add to project.json with the stage off and on (the export st
 each: wrong pixels, pixels showing the model), the stage's seconds (deciding, and the proof), and
 against them the seconds of a 64-sample AO bake of the same scene (the lighting stage with AO
 alone, ``target = "vertex"``; the issue's cost bound). Suzanne is also built into a BSP tree with
-the stage off, on, and on with ``trim = true`` (split inflation, triangles written), and decided again with seeds 0 to 7 (each with its own
-held-out eyes: the wrong pixels per seed). The subpass scene is decided again with ``refine`` 0, 2, 4
+the stage off, on, and on with ``trim = true`` (split inflation, triangles written; the same
+trees with tree seeds 0 to 7, ``bsp_seeds``), and decided again with seeds 0 to 7 (each with its own
+held-out eyes: the wrong pixels per seed). The CAD-style models (the subpass scene, the KUKA arm
+segment of benchmarks/messy_models.json when present) are built into BSP trees the same three
+ways (``cad_bsp``). The subpass scene is decided again with ``refine`` 0, 2, 4
 and 8 (the cost's floor: what fewer refinement eyes cost and what they miss). The Cornell box is seen from an inside box region (the
 middle 60% of the room), the rest from outside. Single runs on a shared 2-core machine: the CPU
 seconds are given beside the wall seconds.
@@ -102,22 +105,9 @@ def run_model(key: str, holdout: int) -> dict:
                 "dropped": r2.details["dropped"], "wrong_pixels": r2.details["holdout"]["wrong_pixels"],
                 "dropped_seen_by_holdout": r2.details["holdout"]["dropped_triangles_seen"]})
     if key == "suzanne":
-        bsp = {}
-        n_model = rec.counts_in["triangles"]
-        for name, extra in (("off", None), ("on", sets), ("on, trim = true", sets + ["mesh.hidden.trim=true"])):
-            c2 = pipeline.load_config_for(path, base + (extra or []) + ["bsp.enabled=true"])
-            res = pipeline.run(c2, cache=None)
-            b = next(r for r in res.records if r.name == "bsp")
-            bsp[name] = {"triangles_in": b.counts_in["triangles"], "triangles_out": b.counts_out["triangles"],
-                         "inflation": round(b.accuracy["inflation"], 4),
-                         "out_vs_model": round(b.counts_out["triangles"] / n_model - 1.0, 4)}
-            h = next((r for r in res.records if r.name == "hidden"), None)
-            if h is not None:
-                hh = h.details["holdout"]
-                bsp[name].update({"hidden_seconds": round(h.seconds, 4), "wrong_pixels": hh["wrong_pixels"],
-                                  "pixels_showing": hh["pixels_showing_the_model"], "holdout_eyes": hh["eyes"],
-                                  "trim": h.details.get("trim")})
-        row["bsp"] = bsp
+        row["bsp"] = bsp_compare(path, base, sets, rec.counts_in["triangles"])
+        # the tree's own seed moves its count by tens of triangles: the same trees with seeds 0-7
+        row["bsp_seeds"] = bsp_seed_sweep(path, base, sets)
         # the same with other seeds: how often the held-out eyes find a dropped triangle
         row["seeds"] = []
         for seed in range(8):
@@ -130,11 +120,95 @@ def run_model(key: str, holdout: int) -> dict:
     return row
 
 
+BSP_STAGES = (("off", None), ("on", []), ("on, trim = true", ["mesh.hidden.trim=true"]))
+
+
+def bsp_compare(path: Path, base: list[str], sets: list[str], n_model: int) -> dict:
+    """The model into a BSP tree (``bsp.enabled``, its defaults) with the hidden stage off, on, and
+    on with trimming: triangles in and after the splits, inflation, written against the model, and
+    the hidden stage's held-out proof and trimming figures."""
+    from bake import pipeline
+
+    bsp = {}
+    for name, more in BSP_STAGES:
+        c2 = pipeline.load_config_for(path, base + ([] if more is None else sets + more)
+                                      + ["bsp.enabled=true"])
+        t = time.perf_counter()
+        res = pipeline.run(c2, cache=None)
+        wall = time.perf_counter() - t
+        b = next(r for r in res.records if r.name == "bsp")
+        bsp[name] = {"triangles_in": b.counts_in["triangles"], "triangles_out": b.counts_out["triangles"],
+                     "inflation": round(b.accuracy["inflation"], 4),
+                     "out_vs_model": round(b.counts_out["triangles"] / n_model - 1.0, 4),
+                     "splits": b.details["splits"], "crossing_pairs_in": b.details["crossing"].get("pairs"),
+                     "bsp_seconds": round(b.seconds, 4), "bake_seconds": round(wall, 4)}
+        h = next((r for r in res.records if r.name == "hidden"), None)
+        if h is not None:
+            hh = h.details["holdout"]
+            bsp[name].update({"hidden_seconds": round(h.seconds, 4), "wrong_pixels": hh["wrong_pixels"],
+                              "pixels_showing": hh["pixels_showing_the_model"], "holdout_eyes": hh["eyes"],
+                              "trim": h.details.get("trim")})
+    return bsp
+
+
+def bsp_seed_sweep(path: Path, base: list[str], sets: list[str], seeds: range = range(8)) -> list[dict]:
+    """Triangles the tree writes with the stage on and on with trimming, for tree seeds
+    (``bsp.seed``) 0-7: how much of a difference between the two is the tree's own scatter."""
+    from bake import pipeline
+
+    out = []
+    for seed in seeds:
+        row: dict = {"seed": seed}
+        for name, more in BSP_STAGES[1:]:
+            c2 = pipeline.load_config_for(path, base + sets + more + ["bsp.enabled=true", f"bsp.seed={seed}",
+                                                                      "mesh.hidden.holdout_eyes=0"])
+            b = next(r for r in pipeline.run(c2, cache=None).records if r.name == "bsp")
+            row["trim" if more else "on"] = b.counts_out["triangles"]
+            row[("trim" if more else "on") + "_in"] = b.counts_in["triangles"]
+        row["trim_minus_on"] = row["trim"] - row["on"]
+        out.append(row)
+    on = [r["on"] for r in out]
+    tr = [r["trim"] for r in out]
+    out.append({"seed": "mean", "on": round(sum(on) / len(on), 1), "trim": round(sum(tr) / len(tr), 1),
+                "on_in": out[0]["on_in"], "trim_in": out[0]["trim_in"],
+                "trim_minus_on": round((sum(tr) - sum(on)) / len(on), 1)})
+    return out
+
+
+# the CAD-style models of issue 42's "measure what it buys": the BSP with the stage off, on, on + trim
+CAD_BSP = {
+    "subpass_scene": ("corpus", "subpass_scene/subpass_scene_opaque.gltf"),
+    "segment": ("models", "segment/segment.obj"),  # KUKA arm segment (benchmarks/messy_models.json)
+}
+MODELS_DIR = Path(os.environ.get("BAKE_MESSY_MODELS", REPO / "benchmarks" / "models"))
+
+
+def run_cad_bsp(holdout: int) -> dict:
+    from bake import pipeline
+
+    out = {}
+    for key, (where, rel) in CAD_BSP.items():
+        path = (CORPUS if where == "corpus" else MODELS_DIR) / rel
+        if not path.exists():
+            print(f"cad_bsp {key}: {path} missing, skipped")
+            continue
+        base = ["export.sb3=false", "export.sprite3=false", "export.reader=false"]
+        cleaned = pipeline.run(pipeline.load_config_for(path, base), until="clean", cache=None).scene
+        sets = ["mesh.hidden.enabled=true", f"mesh.hidden.holdout_eyes={holdout}"]
+        out[key] = {"file": rel, "triangles": cleaned.n_triangles,
+                    "bsp": bsp_compare(path, base, sets, cleaned.n_triangles)}
+        for name, r in out[key]["bsp"].items():
+            print(f"cad_bsp {key} ({name}): {r['triangles_in']:,} -> {r['triangles_out']:,} ({r['inflation']:+.1%}), "
+                  f"wrong pixels {r.get('wrong_pixels')}, {r['bake_seconds']:.1f} s", flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", default=",".join(MODELS))
     ap.add_argument("--holdout", type=int, default=200)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "hidden.json"))
+    ap.add_argument("--no-cad-bsp", action="store_true", help="leave out the CAD models' BSP comparison")
     a = ap.parse_args()
     rows = []
     for key in [m for m in a.models.split(",") if m]:
@@ -151,6 +225,8 @@ def main() -> None:
                        "load_before": os.getloadavg()[0]},
            "defaults": {"eyes": 64, "samples": 2, "refine": 8, "refine_rounds": 3, "holdout_pixels": 64},
            "models": {r["model"]: r for r in rows}, "rows": rows}
+    if not a.no_cad_bsp:
+        doc["cad_bsp"] = run_cad_bsp(a.holdout)
     Path(a.out).write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {a.out}")
 

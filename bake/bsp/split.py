@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..geometry import corners_at, edge_crossings
+
 
 MIN_COS_TILT = np.cos(np.radians(30.0))  # a face tilted further is not in a plane's coplanar group
 
@@ -284,23 +286,12 @@ def _cut(store: FaceStore, idx: np.ndarray, owner: np.ndarray, d: np.ndarray, mi
     K = store.K
     P, A, Vd = store.pos[idx], store.attr[idx], store.vid[idx]
     cnt = store.count[idx]
-    k = np.arange(K)[None, :]
-    valid = k < cnt[:, None]
-    nxt = (k + 1) % cnt[:, None]
-    d1 = np.take_along_axis(d, nxt, axis=1)
-    cross = valid & (d * d1 < 0)
     # the new corner is computed from the positive corner towards the negative one, so two
     # fragments sharing the edge make bit-identical vertices (no crack, exact weld)
-    pos_first = d > 0
-    ia = np.where(pos_first, k, nxt)
-    ib = np.where(pos_first, nxt, k)
-    da = np.take_along_axis(d, ia, axis=1)
-    db = np.take_along_axis(d, ib, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(cross, da / (da - db), 0.0)
+    valid, cross, ia, ib, t = edge_crossings(d, cnt)
     t = t[..., None]
-    Pa, Pb = np.take_along_axis(P, ia[..., None], 1), np.take_along_axis(P, ib[..., None], 1)
-    Aa, Ab = np.take_along_axis(A, ia[..., None], 1), np.take_along_axis(A, ib[..., None], 1)
+    Pa, Pb = corners_at(P, ia), corners_at(P, ib)
+    Aa, Ab = corners_at(A, ia), corners_at(A, ib)
     Pi = store.snap(Pa + t * (Pb - Pa))  # on the grid the positions are written on
     Ai = Aa + t * (Ab - Aa)
     if store.tape is not None:

@@ -170,6 +170,10 @@ class HiddenConfig:
     # cut triangles that pass through each other along each other's planes first, so that the
     # pieces inside are dropped and those that show kept (a source that loses no piece stays whole)
     trim: bool = False
+    # a partly kept source whose kept part takes more triangles than this (its pieces or its
+    # redrawn outline) is written whole instead, as without trimming (0 = no limit): the tree cuts
+    # a whole triangle by one plane into at most 3
+    trim_most: int = 3
     # "culled": a single-sided triangle is drawn (and hides what is behind it) only from its front,
     # as the reader sprite and bake.render draw it; "drawn": every triangle from both sides
     back_faces: Literal["culled", "drawn"] = "culled"
@@ -192,6 +196,7 @@ class HiddenConfig:
             need(len(p) == 3, f"points[{i}]", f"must be [x, y, z] (got {p!r})")
         need(1 <= self.eyes <= 100_000, "eyes", f"must be between 1 and 100000 (got {self.eyes})")
         need(1 <= self.samples <= 64, "samples", f"must be between 1 and 64 (got {self.samples})")
+        need(self.trim_most >= 0, "trim_most", f"must be 0 (no limit) or more (got {self.trim_most})")
         need(self.refine >= 0, "refine", f"must be >= 0 (0 = no refinement; got {self.refine})")
         need(self.refine_rounds >= 0, "refine_rounds", f"must be >= 0 (got {self.refine_rounds})")
         need(0 <= self.caster_samples <= 1024, "caster_samples",

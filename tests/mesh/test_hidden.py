@@ -371,7 +371,8 @@ def test_off_by_default_and_config_errors_name_the_key():
                         (["mesh.hidden.points=[[1, 2]]"], ("mesh.hidden.points[0]", "[x, y, z]")),
                         (["mesh.hidden.eyes=0"], ("mesh.hidden.eyes", "between 1 and 100000")),
                         (["mesh.hidden.back_faces=\"both\""], ("mesh.hidden.back_faces", "'culled'")),
-                        (["mesh.hidden.samples=0"], ("mesh.hidden.samples", "between 1 and 64"))):
+                        (["mesh.hidden.samples=0"], ("mesh.hidden.samples", "between 1 and 64")),
+                        (["mesh.hidden.trim_most=-1"], ("mesh.hidden.trim_most", "0 (no limit) or more"))):
         with pytest.raises(ConfigError) as e:
             config_mod.load(None, sets)
         text = str(e.value)
@@ -459,7 +460,7 @@ def test_trimming_drops_the_inside_of_a_peg_and_leaves_the_picture_as_it_was():
     s = scene_of(base, peg)
     assert len(crossing_pairs(s.positions, s.triangles, 1e-9)) > 0
     plain, _ = run(s)
-    out, rec = run(s, trim=True, holdout_eyes=32)
+    out, rec = run(s, trim=True, trim_most=0, holdout_eyes=32)
     assert rec.accuracy["wrong_pixels"] == 0 and rec.details["trim"]["pieces_dropped"] > 0
     assert len(crossing_pairs(out.positions, out.triangles, 1e-9)) == 0
     tri = out.triangle_vertices()
@@ -476,6 +477,84 @@ def test_trimming_drops_the_inside_of_a_peg_and_leaves_the_picture_as_it_was():
         a, b = render(cam, s.triangle_vertices()), render(cam, tri)
         same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
         assert same.mean() > 0.995  # (pixel centres on a cut edge may fall either way)
+
+
+def test_trimming_cuts_only_where_the_crossings_are():
+    """Three pegs half sunk through a slab's top: the top's two triangles are crossed by twelve
+    peg sides. Cut by whole planes, every side's line runs across the whole top (56 triangles
+    kept on it); cut only where a crossing is and joined again by outline, the top (a square with
+    three square holes, at least 16 + 2 x 3 - 2 = 20 triangles) takes at most 24. The picture is
+    the same, the kept area is the visible one, and no crossing is left."""
+    from bake.bsp.crossing import crossing_pairs
+
+    slab = box([-4, -1, -4], [4, 1, 4])
+    centres = ((-2.0, 1.0), (1.5, -2.0), (2.0, 2.5))
+    pegs = [box([x - 0.5, 0.5, z - 0.5], [x + 0.5, 2.0, z + 0.5]) for x, z in centres]
+    s = scene_of(slab, *pegs)
+    out, rec = run(s, trim=True, trim_most=0, holdout_eyes=32)
+    assert rec.accuracy["wrong_pixels"] == 0
+    assert len(crossing_pairs(out.positions, out.triangles, 1e-9)) == 0
+    tri = out.triangle_vertices()
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    top = np.all(np.abs(tri[:, :, 1] - 1.0) <= 1e-12, axis=1)
+    # the slab: 2 x 64 + 4 x 16, its top less three 1 x 1 holes; each peg: 4 sides of 1 x 1 and a top
+    assert area[top].sum() == pytest.approx(64 - 3, rel=1e-12)
+    assert area.sum() == pytest.approx(2 * 64 + 4 * 16 - 3 + 3 * 5, rel=1e-12)
+    assert 20 <= top.sum() <= 24
+    c, r = regions.bounding_sphere(s.positions)
+    for d in regions.sphere_eyes(8, np.random.default_rng(5)):
+        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
+        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
+        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
+        assert same.mean() > 0.995  # (pixel centres on a cut edge may fall either way)
+
+
+def test_a_source_whose_kept_part_takes_more_than_trim_most_triangles_is_written_whole():
+    """The slab and pegs above with the default ``trim_most = 3``: the slab's top, a square with
+    three holes (at least 20 triangles), is written as its own two triangles again; the peg sides
+    (2 triangles each for what shows) stay trimmed, so nothing crosses, and the picture is the same."""
+    from bake.bsp.crossing import crossing_pairs
+
+    slab = box([-4, -1, -4], [4, 1, 4])
+    pegs = [box([x - 0.5, 0.5, z - 0.5], [x + 0.5, 2.0, z + 0.5]) for x, z in ((-2.0, 1.0), (1.5, -2.0), (2.0, 2.5))]
+    s = scene_of(slab, *pegs)
+    assert HiddenConfig().trim_most == 3
+    out, rec = run(s, trim=True, holdout_eyes=32)
+    full, _ = run(s, trim=True, trim_most=0, holdout_eyes=32)
+    assert rec.accuracy["wrong_pixels"] == 0 and rec.details["trim"]["written_whole"] == 2
+    tri = out.triangle_vertices()
+    top = np.all(np.abs(tri[:, :, 1] - 1.0) <= 1e-12, axis=1)
+    assert top.sum() == 2 and out.n_triangles < full.n_triangles
+    assert len(crossing_pairs(out.positions, out.triangles, 1e-9)) == 0
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert area[top].sum() == pytest.approx(64.0, rel=1e-12)
+    c, r = regions.bounding_sphere(s.positions)
+    for d in regions.sphere_eyes(8, np.random.default_rng(5)):
+        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
+        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
+        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
+        assert same.mean() > 0.995
+
+
+def test_outline_joins_pieces_across_a_cut_that_stops_inside_them():
+    """The kept pieces of the triangle (0,0) (4,0) (0,4): the part x <= 1 and the part 1 <= x <= 2
+    cut again at y = 1 (a cut clipped to its crossing, so the piece x <= 1 has no corner at (1, 1):
+    a T-junction). Their outline is one loop, (0,0) (2,0) (2,2) (0,4) once the corners it goes
+    straight through are left out: two triangles for the six pieces, of the same area."""
+    from bake.mesh.hidden import trim
+
+    v = np.array([[0, 0], [4, 0], [0, 4], [1, 0], [2, 0], [2, 1], [2, 2], [1, 3], [1, 1]], float)
+    pos = np.c_[v, np.zeros(len(v))]
+    polys = [[0, 3, 7, 2], [3, 4, 5, 8], [8, 5, 6, 7]]  # x <= 1; x in [1, 2] below and above y = 1
+    fans = [[p[0], p[i], p[i + 1]] for p in polys for i in (1, 2)]
+    union = make_scene(pos, np.array([[0, 1, 2]] + fans))
+    keep = np.array([False] + [True] * 6)
+    source = np.array([-1] + [0] * 6)
+    out, keep2, redrawn, owner = trim.outline(union, keep, 1, source, 4.0)
+    assert redrawn == 1 and not keep2[:7].any() and keep2[7:].sum() == 2 and np.all(owner[7:] == 0)
+    tri = out.triangle_vertices()[keep2]
+    area = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2]
+    assert np.all(area > 0) and area.sum() == pytest.approx(6.0, rel=1e-12)
 
 
 def test_trimming_is_deterministic_and_off_by_default():

@@ -2,8 +2,9 @@
 view region can see, drop the rest (docs/hidden.md).
 
 0. With ``trim`` (``trim.py``): triangles that pass through each other are cut along each other's
-   planes first, and the steps below decide piece by piece; a source that loses no piece is
-   written whole, one that does keeps its pieces or the outline of them.
+   planes where they cross first, and the steps below decide piece by piece; a source that loses
+   no piece is written whole, one that does keeps its pieces or the outline of them, or is written
+   whole when those take more than ``trim_most`` triangles.
 1. Eyes (``regions.py``): ``eyes`` seeded, stratified eyes on the outside sphere and in each box;
    the given points and the reader's camera as they are.
 2. Decide (``visibility.py``): from every eye, ``samples`` rays at stratified points of every
@@ -284,11 +285,16 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     if trimmed is not None:
         union, keep_union, source, trim_info = trim_mod.merge_back(original, scene, trimmed[0], trimmed[1], keep)
         trim_info["crossing_pairs"] = trimmed[2]
-        union, keep_union, trim_info["outlines_redrawn"] = trim_mod.outline(
-            union, keep_union, original.n_triangles, np.concatenate(
-                [source, np.full(union.n_triangles - len(source), -1, np.int64)]), original.scale(),
-            TRIM_EPS * original.scale())
+        source = np.concatenate([source, np.full(union.n_triangles - len(source), -1, np.int64)])
+        union, keep_union, trim_info["outlines_redrawn"], source = trim_mod.outline(
+            union, keep_union, original.n_triangles, source, original.scale())
+        if cfg.trim_most > 0:
+            keep_union, trim_info["written_whole"] = trim_mod.whole_again(
+                keep_union, original.n_triangles, source, cfg.trim_most)
         out = keep_triangles(union, keep_union)
+        # both sides of these show (a redrawn outline or a source kept whole passes through a kept
+        # triangle): the BSP cuts them, which costs it fewer triangles than keeping the pieces
+        trim_info["crossings_left"] = int(len(trim_mod.crossing(out, TRIM_EPS * original.scale())))
     else:
         out = keep_triangles(scene, keep) if dropped.any() else scene
     out.validate()

@@ -5,20 +5,26 @@ ones inside (docs/hidden.md, "Trimming").
 The crossing pairs are ``bake.bsp.crossing.crossing_pairs`` (the BSP's own test: two triangles
 whose interiors pass through each other, neighbours across an edge excluded). Each triangle of a
 pair is cut by the plane of each triangle it crosses, in rounds (round ``j``: every triangle's
-``j``-th plane, all triangles at once), each piece a convex polygon kept as barycentric
+``j``-th plane, all triangles at once), but only the pieces where the crossing is: a piece is cut
+when its chord along the plane overlaps the stretch of that line inside the other triangle (a
+piece the crossing does not enter does not cross it, so cutting it would only add pieces, and the
+kept ones would need joining again). Each piece is a convex polygon kept as barycentric
 coordinates of its source triangle, so positions, UVs and vertex colours of the new corners are
 interpolated from the source's. A corner within ``eps`` of a plane is on it (no sliver); a new
 corner is computed from the corner on the plane's positive side towards the negative one, so the
 two pieces on either side of a cut get bit-identical corners. Pieces are fanned into triangles.
 
 The hidden stage decides on the cut scene; a source whose pieces are all kept is written whole
-again (:func:`merge_back`), so trimming changes only triangles that lost a piece.
+again (:func:`merge_back`), so trimming changes only triangles that lost a piece. Those keep their
+pieces or the outline of them (:func:`outline`), or are written whole again when that takes more
+than ``trim_most`` triangles (:func:`whole_again`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ...geometry import corners_at, edge_crossings
 from ...scene import Scene
 from ..clean import unique_rows
 
@@ -33,22 +39,10 @@ def _clip(bary: np.ndarray, count: np.ndarray, d: np.ndarray, positive: bool) ->
     """The part of each convex polygon (``bary`` (n, K, 3), ``count``) where the signed distance
     ``d`` (n, K) is >= 0 (``positive``) or <= 0: Sutherland-Hodgman, all polygons at once."""
     n, K = d.shape
-    k = np.arange(K)[None, :]
-    valid = k < count[:, None]
-    nxt = (k + 1) % np.maximum(count, 1)[:, None]
-    s = d if positive else -d
-    inside = valid & (s >= 0)
-    cross = valid & (d * np.take_along_axis(d, nxt, axis=1) < 0)
     # the new corner from the positive corner towards the negative one (the same for both sides)
-    pos_first = d > 0
-    ia = np.where(pos_first, k, nxt)
-    ib = np.where(pos_first, nxt, k)
-    da = np.take_along_axis(d, ia, axis=1)
-    db = np.take_along_axis(d, ib, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.where(cross, da / (da - db), 0.0)
-    ba = np.take_along_axis(bary, ia[..., None], axis=1)
-    bb = np.take_along_axis(bary, ib[..., None], axis=1)
+    valid, cross, ia, ib, t = edge_crossings(d, count)
+    inside = valid & ((d if positive else -d) >= 0)
+    ba, bb = corners_at(bary, ia), corners_at(bary, ib)
     new = ba + t[..., None] * (bb - ba)
     # slots: corner i (if inside), then the crossing on edge i (if any)
     slots = np.stack([bary, new], axis=2).reshape(n, 2 * K, 3)
@@ -57,6 +51,37 @@ def _clip(bary: np.ndarray, count: np.ndarray, d: np.ndarray, positive: bool) ->
     out = np.take_along_axis(slots, order[..., None], axis=1)[:, :K]
     cnt = keep.sum(axis=1)
     return out, np.minimum(cnt, K)
+
+
+def _interval(pts: np.ndarray, d: np.ndarray, valid: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The extent, along ``u``, of where each convex polygon (corners ``pts`` (n, K, 3), signed
+    distances ``d`` (n, K) to a plane, ``valid`` (n, K)) meets the plane: ``(lo, hi)``, lo > hi
+    where it does not."""
+    valid, cross, ia, ib, t = edge_crossings(d, valid.sum(axis=1))
+    pa = corners_at(pts, ia)
+    x = np.where(cross[..., None], pa + t[..., None] * (corners_at(pts, ib) - pa), pts)
+    on = valid & ((d == 0) | cross)
+    tx = np.einsum("nkx,nx->nk", x, u)
+    lo = np.where(on, tx, np.inf).min(axis=1)
+    hi = np.where(on, tx, -np.inf).max(axis=1)
+    return lo, hi
+
+
+def _chord_meets(pos: np.ndarray, d: np.ndarray, count: np.ndarray, other: np.ndarray, n_src: np.ndarray,
+                 off_src: np.ndarray, n_other: np.ndarray, eps: float) -> np.ndarray:
+    """(n,) bool: whether the chord of each piece (corners ``pos``, distances ``d`` to the other
+    triangle's plane) along the line where the source's plane meets the other's overlaps, by more
+    than ``eps``, the stretch of that line inside the other triangle ``other`` (n, 3, 3)."""
+    u = np.cross(n_src, n_other)
+    un = np.linalg.norm(u, axis=1)
+    K = d.shape[1]
+    valid = np.arange(K)[None, :] < count[:, None]
+    plo, phi = _interval(pos, d, valid, u)
+    dq = np.einsum("nkx,nx->nk", other, n_src) - off_src[:, None]
+    dq[np.abs(dq) < eps] = 0.0
+    qlo, qhi = _interval(other, dq, np.ones(dq.shape, bool), u)
+    parallel = un < 1e-9
+    return parallel | (np.minimum(phi, qhi) - np.maximum(plo, qlo) > eps * un)
 
 
 def cut(scene: Scene, pairs: np.ndarray, eps: float) -> dict:
@@ -95,7 +120,14 @@ def cut(scene: Scene, pairs: np.ndarray, eps: float) -> dict:
         s = act[straddle]
         if len(s) == 0:
             continue
-        ds = d[straddle]
+        # only where the piece's chord on the plane meets the other triangle: a piece the
+        # crossing segment does not enter does not cross it (the cut is clipped to the crossing)
+        meets = _chord_meets(pos[straddle], d[straddle], count[s], corners[p[s]], n[src[s]], off[src[s]],
+                             n[p[s]], eps)
+        s = s[meets]
+        if len(s) == 0:
+            continue
+        ds = d[straddle][meets]
         fb, fc = _clip(bary[s], count[s], ds, True)
         bb, bc = _clip(bary[s], count[s], ds, False)
         bary[s], count[s] = fb, fc
@@ -203,30 +235,37 @@ def merge_back(scene: Scene, cut: Scene, src: np.ndarray, n_uncut: int, keep_cut
     return union, keep, source, info
 
 
-__all__ = ["crossing", "cut", "cut_scene", "merge_back", "outline"]
+__all__ = ["crossing", "cut", "cut_scene", "merge_back", "outline", "whole_again"]
 
 
-def outline(union: Scene, keep: np.ndarray, n_orig: int, source: np.ndarray, scale: float, tol: float
-            ) -> tuple[Scene, np.ndarray, int]:
+def outline(union: Scene, keep: np.ndarray, n_orig: int, source: np.ndarray, scale: float
+            ) -> tuple[Scene, np.ndarray, int, np.ndarray]:
     """Redraw the kept pieces of each partly kept source as few triangles: the outline of the
     pieces (the edges only one kept piece of the source has), when it is one closed loop, with its
     straight-through corners left out, triangulated again (``bake.mesh.triangulate``: a fan where
     valid, ear clipping where not). ``source`` (T_union,) is each triangle's source (-1: not a
-    piece). Returns the scene with the new triangles appended, the keep mask over it (the pieces
-    of a redrawn source dropped), and how many sources were redrawn. All sources at once: the
-    loops are walked by pointer jumping (list ranking), not one by one."""
+    piece). The pieces' edges are first cut at the corners of other pieces that lie on them (the
+    T-junctions a cut clipped to its crossing leaves, :func:`_split_at_corners`), so the inner
+    edges match. A redrawn outline may pass through a kept triangle that its pieces met only
+    along a cut (both sides of that crossing show): the BSP cuts it there, which costs the tree
+    fewer triangles than keeping the pieces does (docs/hidden.md, "Trimming"). Returns the scene
+    with the new triangles appended, the keep mask over it (the pieces of a redrawn source
+    dropped), how many sources were redrawn, and the source of each of its triangles (``source``
+    and the new triangles' sources). All sources at once: the loops are walked by
+    pointer jumping (list ranking), not one by one."""
     from ..triangulate import triangulate
 
     piece = (np.arange(union.n_triangles) >= n_orig) & keep
     ids = np.flatnonzero(piece)
     if len(ids) == 0:
-        return union, keep, 0
+        return union, keep, 0, source
     tri = union.triangles[ids]
     src = source[ids]
     # directed edges of the kept pieces; an edge both ways within one source is inside the region
     a = tri.ravel()
     b = np.roll(tri, -1, axis=1).ravel()
     s = np.repeat(src, 3)
+    a, b, s = _split_at_corners(union.positions, a, b, s, tri, src, scale)
     Vn = union.n_vertices + 1
     fwd = (s * Vn + a) * Vn + b
     rev = (s * Vn + b) * Vn + a
@@ -263,6 +302,8 @@ def outline(union: Scene, keep: np.ndarray, n_orig: int, source: np.ndarray, sca
         dist = np.where(live, dist + dist[np.where(live, p, 0)], dist)
         p = np.where(live, p[np.maximum(p, 0)], -1)
     good = ok_src[s]
+    if not good.any():  # no source's outline is one loop
+        return union, keep, 0, source
     # order each source's loop: by source, then by distance to the loop's end (descending)
     o = np.lexsort((-dist[good], s[good]))
     loop_v, loop_s = a[good][o], s[good][o]
@@ -285,7 +326,7 @@ def outline(union: Scene, keep: np.ndarray, n_orig: int, source: np.ndarray, sca
     fewer &= sizes >= 3
     sel = np.isin(grp, np.flatnonzero(fewer))
     if not fewer.any():
-        return union, keep, 0
+        return union, keep, 0, source
     sizes, loop_v, redraw_src = sizes[fewer], loop_v[sel], redraw_src[fewer]
     tr = triangulate(P, sizes, loop_v)
     new = loop_v[tr.corners]
@@ -315,18 +356,53 @@ def outline(union: Scene, keep: np.ndarray, n_orig: int, source: np.ndarray, sca
             [union.tri_lightmap_uvs, _corner_uvs(union, rows, new, "tri_lightmap_uvs")]))
     drop = np.isin(source, redraw_src) & piece
     keep2 = np.concatenate([keep & ~drop, np.ones(len(new), bool)])
-    # a redrawn outline may pass through a triangle its pieces only met along a cut (both sides of
-    # a crossing were kept): those sources keep their pieces
-    from ...bsp.crossing import crossing_pairs
+    return out, keep2, int(len(redraw_src)), np.concatenate([source, owner])
 
-    live = np.flatnonzero(keep2)
-    pairs = live[crossing_pairs(out.positions, out.triangles[live], tol)]
-    T0 = union.n_triangles
-    bad = np.unique(owner[pairs[pairs >= T0] - T0]) if len(pairs) else np.zeros(0, np.int64)
-    if len(bad):
-        keep2[np.flatnonzero(np.isin(source, bad) & piece)] = True
-        keep2[T0 + np.flatnonzero(np.isin(owner, bad))] = False
-    return out, keep2, int(len(redraw_src) - len(bad))
+
+def whole_again(keep: np.ndarray, n_orig: int, source: np.ndarray, most: int) -> tuple[np.ndarray, int]:
+    """The keep mask with every partly kept source whose kept part takes more than ``most``
+    triangles (its pieces or its redrawn outline) written whole again instead, and how many.
+    ``source`` (T,) is each triangle's source (-1: not a piece). Whole, the source shows what its
+    kept part showed and its hidden part stays hidden (as without trimming); the tree then cuts
+    it where it crosses a kept triangle, into at most 3 triangles per plane."""
+    mine = (np.arange(len(keep)) >= n_orig) & keep & (source >= 0)
+    cost = np.bincount(source[mine], minlength=n_orig)
+    back = np.flatnonzero(cost > most)
+    keep = keep.copy()
+    keep[back] = True
+    keep[mine & np.isin(source, back)] = False
+    return keep, int(len(back))
+
+
+def _split_at_corners(P: np.ndarray, a: np.ndarray, b: np.ndarray, s: np.ndarray, tri: np.ndarray,
+                      src: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The directed edges ``a -> b`` (of source ``s``) cut at every corner of a kept piece of the
+    same source that lies inside them: a cut clipped to its crossing ends on an edge that the
+    piece beyond it does not have a corner on (a T-junction), and the two pieces' edges match only
+    once that edge is cut there too. All sources at once (edges x corners of the same source)."""
+    sv = np.unique(np.stack([np.repeat(src, 3), tri.ravel()], axis=1), axis=0)  # (source, corner), sorted
+    E = len(a)
+    lo = np.searchsorted(sv[:, 0], s, side="left")
+    hi = np.searchsorted(sv[:, 0], s, side="right")
+    cnt = hi - lo
+    e = np.repeat(np.arange(E), cnt)
+    v = sv[np.repeat(lo, cnt) + (np.arange(len(e)) - np.repeat(np.cumsum(cnt) - cnt, cnt)), 1]
+    ab = P[b[e]] - P[a[e]]
+    av = P[v] - P[a[e]]
+    L2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.einsum("ij,ij->i", av, ab)
+    off = np.linalg.norm(np.cross(ab, av), axis=1)
+    on = (v != a[e]) & (v != b[e]) & (t > 0) & (t < L2) & (off <= 1e-9 * L2 + 1e-18 * scale * scale)
+    if not on.any():
+        return a, b, s
+    # each edge's corners in order along it: a, the corners inside, b
+    ee = np.concatenate([np.arange(E), e[on], np.arange(E)])
+    tt = np.concatenate([np.zeros(E), t[on] / L2[on], np.ones(E)])
+    vv = np.concatenate([a, v[on], b])
+    o = np.lexsort((tt, ee))
+    ee, vv = ee[o], vv[o]
+    step = ee[1:] == ee[:-1]
+    return vv[:-1][step], vv[1:][step], s[ee[:-1][step]]
 
 
 def _corner_uvs(union: Scene, rows: np.ndarray, new: np.ndarray, name: str = "tri_uvs") -> np.ndarray:

@@ -75,7 +75,8 @@ def _num(v: Any) -> Any:
 class ReportSection:
     """A stage's own section of report.html, as plain text (the outputs render it): a title, rows
     of (label, text), and optionally a note and a table under them (``head``: column titles;
-    ``numeric``: which columns hold numbers; ``table``: rows of cell texts)."""
+    ``numeric``: which columns hold numbers; ``table``: rows of cell texts; ``images``: pictures,
+    each a caption and a base64 PNG, drawn at 3 screen pixels per pixel)."""
 
     title: str
     rows: list[tuple[str, str]]
@@ -83,3 +84,4 @@ class ReportSection:
     head: tuple[str, ...] = ()
     numeric: tuple[bool, ...] = ()
     table: list[tuple[str, ...]] = field(default_factory=list)
+    images: list[tuple[str, str]] = field(default_factory=list)  # (caption, base64 PNG), shown after the rows

@@ -17,7 +17,7 @@ know no stage by name:
 - ``check``: the range check of its section, run before every bake whether the stage runs or not;
 - ``advice``: what to tell the author after it ran (it may read the records before it);
 - ``report``: its own section of report.html (``section(stage entry of report.json) ->
-  ReportSection``);
+  ReportSection``, or ``section(entry, the whole report)`` to read other stages' entries too);
 - ``on_grid``: it builds on the positions as the export will write them (the grid is fixed once,
   before the first such stage); ``leaves``: what it must leave for the bake to go on ("faces": an import without any is an
   input error; "triangles": likewise after triangulation and cleaning).
@@ -62,7 +62,7 @@ class StageSpec:
     error: tuple[str, str] | None = None  # (record key, label)
     check: str | Callable | None = None  # "module:function"(section)
     advice: str | Callable | None = None  # "module:function"(cfg, scene, record, records before)
-    report: str | Callable | None = None  # "module:function"(stage entry of report.json) -> ReportSection | None
+    report: str | Callable | None = None  # "module:function"(stage entry[, report]) -> ReportSection | None
     on_grid: bool = False
     leaves: str | None = None  # "faces" | "triangles"
     config: tuple[str, type] | None = None  # (TOML table, dataclass) of a section the stage brings
@@ -96,6 +96,16 @@ def _textures_section(cfg: Config):
                                                                           out_dir=cfg.out_dir))
 
 
+def _hidden_section(cfg: Config):
+    """The hidden stage's job, told which BSP tree the bake builds (the BSP stage's entry, its
+    section and the written grid) when the proof compares the splits with and without the removal."""
+    job = _load("bake.mesh.hidden.stage:job")
+    if not (cfg.bsp.enabled and cfg.mesh.hidden.bsp_proof):
+        return job(cfg)
+    bsp = spec("bsp")
+    return job(cfg, _load("bake.mesh.hidden.stage:TreeProof")(bsp.entry, bsp.section_of(cfg), written_precision(cfg)))
+
+
 STAGES: tuple[StageSpec, ...] = (
     StageSpec("import", "bake.importers.stage:stage", "bake.importers.stage:job", keys=("import.",),
               advice="bake.advice:unused_textures", leaves="faces"),
@@ -104,7 +114,7 @@ STAGES: tuple[StageSpec, ...] = (
               keys=("mesh.triangulate.",), leaves="triangles"),
     StageSpec("clean", "bake.mesh.clean:stage", lambda c: c.mesh.clean, lambda c: c.mesh.clean.enabled,
               "mesh.clean.enabled", keys=("mesh.clean.",), leaves="triangles"),
-    StageSpec("hidden", "bake.mesh.hidden.stage:stage", "bake.mesh.hidden.stage:job", lambda c: c.mesh.hidden.enabled,
+    StageSpec("hidden", "bake.mesh.hidden.stage:stage", _hidden_section, lambda c: c.mesh.hidden.enabled,
               "mesh.hidden.enabled", keys=("mesh.hidden.",), error=("wrong_pixel_share", "share of held-out "
                                                                      "pixels showing a dropped triangle"),
               report="bake.mesh.hidden.stage:section"),

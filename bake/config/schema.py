@@ -185,6 +185,10 @@ class HiddenConfig:
     # eye in a box, at a point or at the camera
     holdout_eyes: int = 64
     holdout_pixels: int = 64  # pixels along the side of a view or of a cube-map face
+    pictures: int = 3  # held-out eyes whose pictures (with and without the removal) go into the report
+    # with bsp.enabled: build the bake's BSP tree on the stage's input and on its output too, so the
+    # report gives the splits' inflation with and without the removal (costs two tree builds)
+    bsp_proof: bool = True
     threads: int = 0  # 0 = all cores
     seed: int = 0
 
@@ -204,6 +208,7 @@ class HiddenConfig:
         need(self.holdout_eyes >= 0, "holdout_eyes", f"must be >= 0 (0 = no proof; got {self.holdout_eyes})")
         need(2 <= self.holdout_pixels <= 512, "holdout_pixels",
              f"must be between 2 and 512 (got {self.holdout_pixels})")
+        need(0 <= self.pictures <= 16, "pictures", f"must be between 0 and 16 (got {self.pictures})")
         need(self.threads >= 0, "threads", f"must be >= 0 (0 = all cores; got {self.threads})")
 
 

@@ -17,6 +17,7 @@ adds a few lines of script that reload the page when the watch writes a new one 
 from __future__ import annotations
 
 import base64
+import inspect
 import html
 import io
 import json
@@ -338,6 +339,11 @@ def _tie(report: dict, mesh) -> float:
     return tie_tolerance(epsilon, None if decimals is None else int(decimals), size or 1.0)
 
 
+def _png_width(b64: str) -> int:
+    """The width of a base64 PNG (its IHDR chunk)."""
+    return int.from_bytes(base64.b64decode(b64[:32])[16:20], "big")
+
+
 def _stage_sections(report: dict) -> list[str]:
     """The sections the stages contribute (``StageSpec.report``: plain rows, rendered here), in
     the order of the stages."""
@@ -346,7 +352,10 @@ def _stage_sections(report: dict) -> list[str]:
     for spec in registry.STAGES:
         if spec.report is None or spec.name not in by_name:
             continue
-        sec = spec.load_report()(by_name[spec.name])
+        fn = spec.load_report()
+        # a section function takes its stage's entry, and the whole report if it has a second parameter
+        two = len(inspect.signature(fn).parameters) >= 2
+        sec = fn(by_name[spec.name], report) if two else fn(by_name[spec.name])
         if sec is None:
             continue
         body = "".join(f"<tr><td>{_esc(k)}</td><td>{_esc(v)}</td></tr>" for k, v in sec.rows)
@@ -357,6 +366,11 @@ def _stage_sections(report: dict) -> list[str]:
             rows = "".join("<tr>" + "".join(f"<td class=n>{_esc(c)}</td>" if n else f"<td>{_esc(c)}</td>"
                                             for c, n in zip(row, num)) + "</tr>" for row in sec.table)
             html_ += f"<p class=sub>{_esc(sec.note)}</p><table><tr>{head}</tr>{rows}</table>"
+        if sec.images:
+            figs = "".join(f"<figure><img alt='{_esc(c)}' style='image-rendering:pixelated;width:{3 * _png_width(b)}px' "
+                           f"src='data:image/png;base64,{b}'><figcaption>{_esc(c)}</figcaption></figure>"
+                           for c, b in sec.images)
+            html_ += f"<div class=views>{figs}</div>"
         out.append(html_)
     return out
 

@@ -40,10 +40,22 @@ from ...config import HiddenConfig, LightingConfig
 from ...errors import ConfigError
 from ...record import ReportSection, StageRecord
 from ...scene import Material, Scene
+from ...scratch.numbers import position_decimals
 from ..clean import unique_rows
+from . import proof as proof_mod
 from . import regions as regions_mod
 from . import trim as trim_mod
 from .visibility import Visibility
+
+
+@dataclass(frozen=True)
+class TreeProof:
+    """The BSP tree the bake builds, for the proof's splits with and without the removal: the BSP
+    stage's entry ("module:function"), its section and the written grid's digits."""
+
+    entry: str
+    bsp: Any
+    decimals: int | None
 
 
 @dataclass(frozen=True)
@@ -52,11 +64,13 @@ class HiddenJob:
 
     hidden: HiddenConfig
     lighting: LightingConfig | None = None
+    tree: TreeProof | None = None  # the registry wires it in when bsp.enabled and bsp_proof
 
 
-def job(cfg) -> HiddenJob:
+def job(cfg, tree: TreeProof | None = None) -> HiddenJob:
     h = cfg.mesh.hidden
-    return HiddenJob(hidden=h, lighting=cfg.lighting if (cfg.lighting.enabled and h.keep_casters) else None)
+    return HiddenJob(hidden=h, lighting=cfg.lighting if (cfg.lighting.enabled and h.keep_casters) else None,
+                     tree=tree)
 
 
 # ---------------------------------------------------------------------------- materials
@@ -205,6 +219,26 @@ def _unit_perp(w: np.ndarray, turn: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- the stage
+def _tree_proof(before: Scene, after: Scene, tree: TreeProof) -> dict[str, Any]:
+    """The bake's BSP tree built on the stage's input and on its output (the BSP stage itself, on
+    the written grid): triangles in, after the splits, and the inflation, with and without the
+    removal."""
+    import importlib
+
+    mod, fn = tree.entry.split(":")
+    build = getattr(importlib.import_module(mod), fn)
+    t = time.perf_counter()
+    out: dict[str, Any] = {}
+    for name, s in (("without_removal", before), ("with_removal", after)):
+        if tree.decimals is not None:
+            s = s.replace(position_decimals=position_decimals(before.scale(), tree.decimals))
+        _, r = build(s, tree.bsp)
+        t_in, t_out = r.counts_in["triangles"], r.counts_out["triangles"]
+        out[name] = {"triangles_in": t_in, "triangles_out": t_out, "inflation": t_out / max(t_in, 1) - 1.0}
+    out["seconds"] = round(time.perf_counter() - t, 6)
+    return out
+
+
 def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     t0 = time.perf_counter()
     cfg = section.hidden
@@ -316,7 +350,11 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         proof = {"eyes": int(len(held)), "pixels": px["pixels"],
                  "pixels_showing_the_model": px["covered"], "wrong_pixels": px["wrong"],
                  "dropped_triangles_seen": int(px["dropped_seen"].sum()), "rays": vis.rays,
-                 "cut_short": px["cut_short"], "seconds": round(time.perf_counter() - t1, 6)}
+                 "cut_short": px["cut_short"]}
+        proof["pictures"] = proof_mod.pictures(scene, vis, keep, held, views, px["wrong_per_eye"],
+                                               cfg.holdout_pixels, min(cfg.pictures, len(held)),
+                                               two_sided=sided, see_through=clear)
+        proof["seconds"] = round(time.perf_counter() - t1, 6)
         rec.accuracy["wrong_pixels"] = float(px["wrong"])
         rec.accuracy["wrong_pixel_share"] = px["wrong"] / max(px["covered"], 1)
         if px["wrong"]:
@@ -324,6 +362,7 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
                      f"{int(px['dropped_seen'].sum())} dropped triangle(s): raise mesh.hidden.eyes or "
                      "mesh.hidden.samples")
 
+    tree = _tree_proof(original, out, section.tree) if section.tree is not None else None
     n_per = cfg.eyes * cfg.samples
     rec.counts_in = {"vertices": original.n_vertices, "triangles": original.n_triangles,
                      "polygons": original.n_polygons, "materials": len(original.materials)}
@@ -345,6 +384,8 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     }
     if trim_info is not None:
         rec.details["trim"] = trim_info
+    if tree is not None:
+        rec.details["bsp"] = tree
     if camera is not None:
         rec.details["camera_eye"] = [float(x) for x in camera]
     if cfg.camera and camera is None:
@@ -355,8 +396,9 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     return out, rec
 
 
-def section(st: dict[str, Any]) -> ReportSection | None:
-    """The stage's section of report.html, from its entry in report.json."""
+def section(st: dict[str, Any], report: dict[str, Any] | None = None) -> ReportSection | None:
+    """The stage's section of report.html, from its entry in report.json (and the export's, for
+    the bytes)."""
     d = st.get("details") or {}
     if "seen" not in d:
         return None
@@ -368,12 +410,32 @@ def section(st: dict[str, Any]) -> ReportSection | None:
             ("view region", regs),
             ("sampling", f"{d['samples']} rays per eye and triangle; {d['rays']:,} rays in "
                          f"{d['decide_seconds']:.2f} s; {len(d['rounds']) - 1} refinement round(s)")]
+    ex = next((x for x in (report or {}).get("stages", []) if x.get("name") == "export"), None)
+    lists = ((ex or {}).get("details") or {}).get("lists") or {}
+    list_bytes = sum(int(v.get("project_json_bytes", 0)) for v in lists.values())
+    if list_bytes and t_out and t_in > t_out:
+        rows.append(("bytes saved (estimate)", f"about {round(list_bytes * (t_in - t_out) / t_out):,} bytes of "
+                     f"project.json: this bake's lists ({list_bytes:,} bytes for the {t_out:,} triangles kept "
+                     f"here) scaled to the {t_in - t_out:,} dropped; bake with mesh.hidden.enabled = false for "
+                     "the exact figure"))
     h = d.get("holdout") or {}
     if h.get("eyes"):
         rows.append(("held-out proof", f"{h['wrong_pixels']:,} wrong of {h['pixels_showing_the_model']:,} pixels "
                                        f"showing the model, from {h['eyes']} held-out eyes "
                                        f"({h['pixels']:,} pixels)"))
-    return ReportSection("Hidden geometry: what no eye sees", rows)
+    tree = d.get("bsp")
+    if tree:
+        a, b = tree["without_removal"], tree["with_removal"]
+        rows.append(("BSP splits", f"without the removal {a['triangles_in']:,} → {a['triangles_out']:,} triangles "
+                     f"({a['inflation']:+.1%}); with it {b['triangles_in']:,} → {b['triangles_out']:,} "
+                     f"({b['inflation']:+.1%}): the [bsp] settings on this stage's input and output, "
+                     f"before simplify and lighting ({tree['seconds']:.2f} s)"))
+    out = ReportSection("Hidden geometry: what no eye sees", rows)
+    for p in h.get("pictures") or []:
+        where = f"held-out eye {p['eye']} ({p['wrong_pixels']:,} wrong pixels)"
+        out.images += [(f"{where}: the full mesh", p["before"]), (f"{where}: what is kept", p["after"]),
+                       (f"{where}: wrong pixels in red", p["difference"])]
+    return out
 
 
-__all__ = ["stage", "job", "section", "HiddenJob", "keep_triangles", "see_through", "two_sided", "neighbours"]
+__all__ = ["stage", "job", "section", "HiddenJob", "TreeProof", "keep_triangles", "see_through", "two_sided", "neighbours"]

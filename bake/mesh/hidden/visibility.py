@@ -210,10 +210,11 @@ class Visibility:
 
     def pixels(self, eyes: np.ndarray, views: list[np.ndarray], dropped: np.ndarray) -> dict:
         """Pixel-centre rays ``views[i]`` (unit directions) from each eye ``eyes[i]``, through the
-        full mesh; a pixel is wrong when its ray draws a dropped triangle. Counts, and the dropped
-        triangles the held-out eyes saw."""
+        full mesh; a pixel is wrong when its ray draws a dropped triangle. Counts (also per eye), and
+        the dropped triangles the held-out eyes saw."""
         dropped = np.asarray(dropped, bool)
         totals = {"wrong": 0, "covered": 0, "short": 0, "pixels": 0}
+        per_eye = np.zeros(len(eyes), np.int64)
         seen_dropped = np.zeros(self.T, bool)
         lock = threading.Lock()
 
@@ -225,8 +226,10 @@ class Visibility:
                 bad = dropped[prims]
                 mine = np.zeros(self.T, bool)
                 mine[prims[bad]] = True
+                wrong = int(len(np.unique(rays[bad])))
+                per_eye[i] = wrong
                 with lock:
-                    totals["wrong"] += int(len(np.unique(rays[bad])))
+                    totals["wrong"] += wrong
                     totals["covered"] += int(len(np.unique(rays)))
                     totals["short"] += cut
                     totals["pixels"] += len(d)
@@ -234,7 +237,7 @@ class Visibility:
 
         parallel(len(eyes), 1, work, self.tracer.threads)
         return {"pixels": totals["pixels"], "covered": totals["covered"], "wrong": totals["wrong"],
-                "cut_short": totals["short"], "dropped_seen": seen_dropped}
+                "cut_short": totals["short"], "dropped_seen": seen_dropped, "wrong_per_eye": per_eye}
 
     # ------------------------------------------------------------------ lighting
     def surface_points(self, ids: np.ndarray, cell: float, max_level: int, samples: int, seed: int

@@ -14,11 +14,18 @@ held-out eyes: the wrong pixels per seed). The subpass scene is decided again wi
 and 8 (the cost's floor: what fewer refinement eyes cost and what they miss). The Cornell box is seen from an inside box region (the
 middle 60% of the room), the rest from outside. Single runs on a shared 2-core machine: the CPU
 seconds are given beside the wall seconds.
+
+Also, from outside, the public models found for the simplify issue (a CAD assembly, furniture, CAD
+parts, game assets, a vehicle: benchmarks/messy_models.json, with source, licence and sha256). They
+are not committed: they are read from ``--models-dir`` (default benchmarks/models/, or
+BAKE_MESSY_MODELS), and one that is missing or whose bytes differ is skipped, saying so (stdout
+and ``skipped`` in the JSON), as bench_simplify_messy.py does.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import platform
@@ -27,6 +34,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 CORPUS = Path(os.environ.get("BAKE_CORPUS", REPO.parent / "shared" / "corpus"))
+MANIFEST = REPO / "benchmarks" / "messy_models.json"
 
 MODELS = {
     "suzanne": ("suzanne_obj/suzanne.obj", "outside"),
@@ -40,6 +48,22 @@ MODELS = {
 }
 
 
+# the public models of the simplify issue (messy_models.json), all seen from outside
+MESSY = {m["name"]: (m["file"], "outside") for m in json.loads(MANIFEST.read_text())["models"]}
+
+
+def messy_check(name: str, folder: Path) -> str | None:
+    """Why the messy model ``name`` cannot be run from ``folder`` (None: its files are there, with
+    the recorded sha256)."""
+    m = next(x for x in json.loads(MANIFEST.read_text())["models"] if x["name"] == name)
+    bad = [f for f, h in m["files"].items()
+           if not (folder / f).is_file() or hashlib.sha256((folder / f).read_bytes()).hexdigest() != h]
+    if bad:
+        return (f"{name}: {', '.join(bad)} missing or not the recorded bytes (get it from "
+                f"{m['repo']}@{m['commit'][:10]}: {m['path']})")
+    return None
+
+
 def timed(fn):
     t, c = time.perf_counter(), time.process_time()
     out = fn()
@@ -51,14 +75,14 @@ def list_bytes(res) -> int:
     return int(sum(v["project_json_bytes"] for v in ex.details["lists"].values()))
 
 
-def run_model(key: str, holdout: int) -> dict:
+def run_model(key: str, holdout: int, folder: Path | None = None) -> dict:
     from bake import pipeline
     from bake.config import AOConfig, LightingConfig
     from bake.lighting.stage import stage as lighting_stage
     from bake.mesh.hidden.stage import job, stage as hidden_stage
 
-    rel, region = MODELS[key]
-    path = CORPUS / rel
+    rel, region = MODELS[key] if key in MODELS else MESSY[key]
+    path = CORPUS / rel if key in MODELS else folder / rel
     base = ["export.sb3=false", "export.sprite3=false", "export.reader=false"]
     cfg = pipeline.load_config_for(path, base)
     cleaned = pipeline.run(cfg, until="clean", cache=None).scene
@@ -77,7 +101,7 @@ def run_model(key: str, holdout: int) -> dict:
     bytes_on = list_bytes(pipeline.run(on, cache=None))
     h = d["holdout"]
     row = {
-        "model": key, "file": rel, "region": region,
+        "model": key, "file": rel, "region": region, "set": "corpus" if key in MODELS else "messy",
         "triangles_in": rec.counts_in["triangles"], "triangles_out": rec.counts_out["triangles"],
         "dropped": d["dropped"], "dropped_share": d["dropped"] / max(rec.counts_in["triangles"], 1),
         "bytes_off": bytes_off, "bytes_on": bytes_on, "bytes_saved": bytes_off - bytes_on,
@@ -96,7 +120,7 @@ def run_model(key: str, holdout: int) -> dict:
             c2 = pipeline.load_config_for(path, base + sets + [f"mesh.hidden.refine={refine}"])
             _, r2 = hidden_stage(cleaned, job(c2))
             row["refine_sweep"].append({
-                "refine": refine, "eyes_a_round": r2.details["rounds"][-1]["eyes"] if refine else 0,
+                "refine": refine, "eyes_a_round": r2.details["rounds"][1]["eyes"] if refine else 0,
                 "decide_rays": r2.details["rays"], "decide_seconds": r2.details["decide_seconds"],
                 "decide_over_ao64": round(r2.details["decide_seconds"] / max(ao_wall, 1e-9), 3),
                 "dropped": r2.details["dropped"], "wrong_pixels": r2.details["holdout"]["wrong_pixels"],
@@ -132,25 +156,37 @@ def run_model(key: str, holdout: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--models", default=",".join(MODELS))
+    ap.add_argument("--models", default=",".join(list(MODELS) + list(MESSY)),
+                    help="comma-separated: corpus keys and messy model names")
+    ap.add_argument("--models-dir", default=os.environ.get("BAKE_MESSY_MODELS", str(REPO / "benchmarks" / "models")))
     ap.add_argument("--holdout", type=int, default=200)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "hidden.json"))
     a = ap.parse_args()
-    rows = []
+    rows, skipped = [], []
+    folder = Path(a.models_dir)
     for key in [m for m in a.models.split(",") if m]:
-        if not (CORPUS / MODELS[key][0]).exists():
-            print(f"{key}: not in the corpus, skipped")
+        if key in MODELS:
+            where = CORPUS / MODELS[key][0]
+            why = None if where.exists() else f"{key}: not in the corpus ({where})"
+        elif key in MESSY:
+            why = messy_check(key, folder)
+        else:
+            why = f"{key}: not a model of this benchmark"
+        if why:
+            skipped.append(why)
+            print("skip", why, flush=True)
             continue
-        row = run_model(key, a.holdout)
+        row = run_model(key, a.holdout, folder)
         rows.append(row)
         print(f"{key}: {row['triangles_in']:,} -> {row['triangles_out']:,} triangles, {row['bytes_saved']:,} bytes "
               f"saved, {row['wrong_pixels']} wrong of {row['pixels_showing']:,} pixels from {row['holdout_eyes']} "
-              f"held-out eyes; decide {row['decide_seconds']:.2f} s, AO-64 {row['ao64_seconds']:.2f} s", flush=True)
+              f"held-out eyes; decide {row['decide_rays']:,} rays in {row['decide_seconds']:.2f} s, AO-64 "
+              f"{row['ao64_seconds']:.2f} s", flush=True)
     doc = {"command": "benchmarks/bench_hidden.py " + f"--holdout {a.holdout}",
            "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                        "load_before": os.getloadavg()[0]},
            "defaults": {"eyes": 64, "samples": 2, "refine": 8, "refine_rounds": 3, "holdout_pixels": 64},
-           "models": {r["model"]: r for r in rows}, "rows": rows}
+           "skipped": skipped, "models": {r["model"]: r for r in rows}, "rows": rows}
     Path(a.out).write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {a.out}")
 

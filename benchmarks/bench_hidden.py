@@ -8,7 +8,8 @@ the bytes the lists add to project.json with the stage off and on (the export st
 ``project_json_bytes``), the held-out proof (``--holdout`` eyes not used to decide, a pixel grid
 each: wrong pixels, pixels showing the model), the stage's seconds (deciding, and the proof), and
 against them the seconds of a 64-sample AO bake of the same scene (the lighting stage with AO
-alone, ``target = "vertex"``; the issue's cost bound). Suzanne is also built into a BSP tree with
+alone, ``target = "vertex"``; the issue's cost bound), and the same decided without the witness eyes
+(``without_witness``: the refinement rounds' random eyes alone, the method before the messy models). Suzanne is also built into a BSP tree with
 the stage off, on, and on with ``trim = true`` (split inflation, triangles written), and decided again with seeds 0 to 7 (each with its own
 held-out eyes: the wrong pixels per seed). The subpass scene is decided again with ``refine`` 0, 2, 4
 and 8 (the cost's floor: what fewer refinement eyes cost and what they miss). The Cornell box is seen from an inside box region (the
@@ -113,6 +114,24 @@ def run_model(key: str, holdout: int, folder: Path | None = None) -> dict:
         "decide_over_ao64": round(d["decide_seconds"] / max(ao_wall, 1e-9), 3),
         "rounds": d["rounds"],
     }
+    # the same decided without the witness eyes (the refinement rounds' random eyes alone: the method
+    # before issue 42's messy models, byte-identical to it): what the witness rounds keep and cost
+    from bake.mesh.hidden import stage as stage_mod
+
+    saved = stage_mod.DIRECTED_EYES, stage_mod.DIRECTED_ROUNDS
+    stage_mod.DIRECTED_EYES, stage_mod.DIRECTED_ROUNDS = 0, 0
+    try:
+        _, r0 = hidden_stage(cleaned, job(on))
+    finally:
+        stage_mod.DIRECTED_EYES, stage_mod.DIRECTED_ROUNDS = saved
+    h0 = r0.details["holdout"]
+    row["without_witness"] = {
+        "triangles_out": r0.counts_out["triangles"], "wrong_pixels": h0["wrong_pixels"],
+        "pixels_showing": h0["pixels_showing_the_model"], "dropped_seen_by_holdout": h0["dropped_triangles_seen"],
+        "decide_rays": r0.details["rays"], "decide_seconds": r0.details["decide_seconds"]}
+    row["witness_rounds"] = len(d["rounds"]) - 1
+    row["witness_seen"] = int(sum(x.get("directed_seen", 0) for x in d["rounds"][1:]))
+    row["kept_over_without_witness"] = rec.counts_out["triangles"] - r0.counts_out["triangles"]
     if key == "subpass_scene":
         # the floor of the cost (issue 42): fewer refinement eyes, what they cost and what they miss
         row["refine_sweep"] = []

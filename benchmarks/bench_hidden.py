@@ -181,6 +181,7 @@ def main() -> None:
     ap.add_argument("--holdout", type=int, default=200)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "hidden.json"))
     a = ap.parse_args()
+    load_before = os.getloadavg()[0]  # the 1-minute load when the run starts
     rows, skipped = [], []
     folder = Path(a.models_dir)
     for key in [m for m in a.models.split(",") if m]:
@@ -203,7 +204,7 @@ def main() -> None:
               f"{row['ao64_seconds']:.2f} s", flush=True)
     doc = {"command": "benchmarks/bench_hidden.py " + f"--holdout {a.holdout}",
            "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                       "load_before": os.getloadavg()[0]},
+                       "load_before": load_before, "load_after": os.getloadavg()[0]},
            "defaults": {"eyes": 64, "samples": 2, "refine": 8, "refine_rounds": 3, "holdout_pixels": 64},
            "skipped": skipped, "models": {r["model"]: r for r in rows}, "rows": rows}
     Path(a.out).write_text(json.dumps(doc, indent=1) + "\n")

@@ -52,11 +52,15 @@ def stratified_barycentric(k: int, r1: np.ndarray, r2: np.ndarray) -> np.ndarray
 
 
 def _lowest(prims: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The distinct triangles of ``prims`` and, for each, the index of its lowest ``key``."""
-    order = np.lexsort((key, prims))
+    """The distinct triangles of ``prims`` and, for each, the index of its lowest ``key`` (keys
+    distinct and >= 0): one sort of ``prims x (max key + 1) + key``."""
+    if len(prims) == 0:
+        return prims, np.zeros(0, np.int64)
+    order = np.argsort(prims * (int(key.max()) + 1) + key)
+    p = prims[order]
     first = np.ones(len(order), bool)
-    first[1:] = prims[order][1:] != prims[order][:-1]
-    return prims[order][first], order[first]
+    first[1:] = p[1:] != p[:-1]
+    return p[first], order[first]
 
 
 class Visibility:
@@ -126,12 +130,13 @@ class Visibility:
             n = max(batch, -(-MIN_BATCH_RAYS // (len(cand) * (samples + 3 * corners))))
             ee = eyes[first:first + n]
             C = len(cand)
-            hit, cut = self._aim(ee, cand, len(ee) * C, lambda q, C=C: (q // C, q % C), samples, seed,
-                                 stream * 4099 + b, corners)
+            has = None if witness is None else ~np.isnan(witness[:, 0])
+            got, hit, cut = self._aim(ee, cand, len(ee) * C, lambda q, C=C: (q // C, q % C), samples, seed,
+                                      stream * 4099 + b, corners, has)
             if witness is not None:
                 self._witness(witness, hit, ee, None if owner is None else owner[first:first + n],
                               lambda q, C=C: q // C)
-            seen[hit[0]] = True
+            seen |= got
             short += cut
             cand = cand[~seen[cand]]
             first, b = first + n, b + 1
@@ -143,13 +148,12 @@ class Visibility:
         stratified points of triangle ``aim[i]`` and one just inside each of its corners (if it
         could face the eye): explicit (eye, triangle) pairs, in one batch."""
         aim = np.asarray(aim, np.int64)
-        seen = np.zeros(self.T, bool)
         if len(aim) == 0:
-            return seen, 0
-        hit, cut = self._aim(eyes, aim, len(aim), lambda q: (q, q), samples, seed, stream, True)
+            return np.zeros(self.T, bool), 0
+        has = None if witness is None else ~np.isnan(witness[:, 0])
+        seen, hit, cut = self._aim(eyes, aim, len(aim), lambda q: (q, q), samples, seed, stream, True, has)
         if witness is not None:
             self._witness(witness, hit, eyes, owner, lambda q: q)
-        seen[hit[0]] = True
         return seen, cut
 
     @staticmethod
@@ -159,23 +163,25 @@ class Visibility:
         point the ray was aimed at (the rays of every work item: the answer is the same for any
         thread count)."""
         prims, key, target, k = hit
-        new = np.isnan(witness[prims, 0])
-        prims, q = prims[new], eye_of(key[new] // k)
+        q = eye_of(key // k)
         witness[prims, :3] = eyes[q]
         witness[prims, 3] = -1.0 if owner is None else owner[q]
-        witness[prims, 4:7] = target[new]
+        witness[prims, 4:7] = target
 
     def _aim(self, eyes: np.ndarray, cand: np.ndarray, P: int, pair, samples: int, seed: int, stream: int,
-             corners: bool) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, int], int]:
+             corners: bool, has: np.ndarray | None = None
+             ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, int], int]:
         """The rays of ``P`` (eye, candidate) pairs, ``pair(q) -> (eye numbers, candidate numbers)``:
-        ``((triangles drawn, the lowest ray number that drew each, where that ray was aimed, rays per
-        pair), rays cut short)``."""
+        ``(seen (T,), (triangles drawn that ``has`` (a witness already) is not true of, the lowest
+        ray number that drew each, where that ray was aimed, rays per pair), rays cut short)``."""
         cand = np.asarray(cand, np.int64)
         kk = samples + 3 * corners
+        seen = np.zeros(self.T, bool)
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         short = [0]
+        none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), kk)
         if P == 0:
-            return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), kk), 0
+            return seen, none, 0
         # the random numbers: one generator per CHUNK_RAYS rays of pairs, as drawn up front; the
         # work goes in smaller items (DECIDE_CHUNK_RAYS: both threads busy on a small batch)
         rng_per = max(1, CHUNK_RAYS // kk)
@@ -210,21 +216,27 @@ class Visibility:
             good = np.flatnonzero(ln > 0)
             d = d[good] / ln[good, None]
             rays, prims, cut = self.chain(o[good], d)
-            row = good[rays]
-            key = (a + ok[row // k]) * k + row % k  # the ray's number in the batch
-            up, first = _lowest(prims, key)
+            mine = np.zeros(self.T, bool)
+            mine[prims] = True
+            if has is not None:  # the witnesses of the triangles that have none yet
+                new = np.flatnonzero(~has[prims])
+                row = good[rays[new]]
+                key = (a + ok[row // k]) * k + row % k  # the ray's number in the batch
+                up, first = _lowest(prims[new], key)
             with lock:
-                parts.append((up, key[first], target[row[first]]))
+                np.logical_or(seen, mine, out=seen)
+                if has is not None:
+                    parts.append((up, key[first], target[row[first]]))
                 short[0] += cut
 
         parallel(P, per, work, self.tracer.threads)
         if not parts:
-            return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), kk), short[0]
+            return seen, none, short[0]
         prims = np.concatenate([x[0] for x in parts])
         key = np.concatenate([x[1] for x in parts])
         target = np.concatenate([x[2] for x in parts])
         up, first = _lowest(prims, key)
-        return (up, key[first], target[first], kk), short[0]
+        return seen, (up, key[first], target[first], kk), short[0]
 
     # ------------------------------------------------------------------ the proof
     @staticmethod

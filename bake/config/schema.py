@@ -164,7 +164,8 @@ class HiddenConfig:
     boxes: list[HiddenBox] = field(default_factory=list)  # [[mesh.hidden.boxes]] min = [...], max = [...]
     eyes: int = 64  # eyes sampled on the outside sphere and in each box
     samples: int = 2  # rays per eye and triangle, aimed at stratified points of the triangle
-    # rounds of more eyes (refine x eyes) aimed at the unseen triangles that touch a seen one
+    # rounds of more eyes (refine x eyes, and eyes around the witnesses of the seen neighbours) aimed
+    # at the unseen triangles that touch a seen one; then witness rounds alone while they find any
     refine: int = 8
     refine_rounds: int = 3
     # cut triangles that pass through each other along each other's planes first, so that the

@@ -160,6 +160,73 @@ def test_held_out_outside_eyes_show_no_dropped_triangle_in_a_zbuffer():
         assert not np.isin(img.tri_id, dropped).any()
 
 
+def shaft_block(h: float = 0.05, rows: int = 20):
+    """A closed block [-1, 1]^3 with a square shaft 2h wide sunk from its top to y = 0 (walls in
+    ``rows`` rows of quads, facing into the shaft, a floor at the bottom), and a small closed box
+    inside the solid part. The deep rows and the floor show only to eyes within a few degrees of
+    the shaft's axis: through a gap, as the insides of a CAD assembly do."""
+    tris, want = [], []
+
+    def quad_(a, b, c, d, n):
+        tris.extend([(a, b, c), (a, c, d)])
+        want.extend([n, n])
+
+    O = [(-1, 1, -1), (1, 1, -1), (1, 1, 1), (-1, 1, 1)]
+    H = [(-h, 1, -h), (h, 1, -h), (h, 1, h), (-h, 1, h)]
+    for i in range(4):  # the top, a ring around the shaft sharing its corners
+        quad_(O[i], O[(i + 1) % 4], H[(i + 1) % 4], H[i], (0, 1, 0))
+    ys = np.linspace(1, 0, rows + 1)
+    for a, b in zip(ys[:-1], ys[1:]):
+        quad_((h, a, -h), (h, a, h), (h, b, h), (h, b, -h), (-1, 0, 0))
+        quad_((-h, a, -h), (-h, a, h), (-h, b, h), (-h, b, -h), (1, 0, 0))
+        quad_((-h, a, h), (h, a, h), (h, b, h), (-h, b, h), (0, 0, -1))
+        quad_((-h, a, -h), (h, a, -h), (h, b, -h), (-h, b, -h), (0, 0, 1))
+    quad_((-h, 0, -h), (h, 0, -h), (h, 0, h), (-h, 0, h), (0, 1, 0))  # the floor
+    for sg in (-1, 1):
+        quad_((sg, -1, -1), (sg, -1, 1), (sg, 1, 1), (sg, 1, -1), (sg, 0, 0))
+        quad_((-1, -1, sg), (1, -1, sg), (1, 1, sg), (-1, 1, sg), (0, 0, sg))
+    quad_((-1, -1, -1), (1, -1, -1), (1, -1, 1), (-1, -1, 1), (0, -1, 0))
+    p = np.array(tris, float)
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", n, np.array(want, float)) < 0
+    p[flip] = p[flip][:, ::-1]
+    inner = box([0.4, -0.7, 0.4], [0.7, -0.4, 0.7])
+    return scene_of((p.reshape(-1, 3), np.arange(3 * len(p)).reshape(-1, 3)), inner)
+
+
+def test_what_shows_only_through_a_gap_is_kept(monkeypatch):
+    """The walls deep in a narrow shaft and its floor show only to eyes within a few degrees of
+    its axis (as parts of 2CylinderEngine show through the gaps between other parts): the rounds
+    aimed from eyes around the ones that saw a neighbour (witnesses) follow them down, so every
+    triangle the numpy z-buffer shows from above the shaft is kept, and the box inside the
+    solid block is still dropped. Without those eyes (the random refinement rounds alone) most
+    of the shaft is dropped."""
+    s = shaft_block()
+    inner = set(range(s.n_triangles - 12, s.n_triangles))
+    tri = s.triangle_vertices()
+    shown: set[int] = set()
+    for deg in (0.0, 1.0, 2.0):
+        a = np.radians(deg)
+        cam = Camera((3 * np.sin(a), 1 + 2 * np.cos(a), 0.0), (0.0, 0.5, 0.0), fov=6.0, width=160, height=160,
+                     up=(0, 0, 1), near=1e-6)
+        img = render(cam, tri)
+        shown |= set(np.unique(img.tri_id[img.tri_id >= 0]).tolist())
+    floor = {s.n_triangles - 12 - 12, s.n_triangles - 12 - 11}
+    assert floor <= shown and not shown & inner
+    for seed in (0, 1):
+        out, rec = run(s, seed=seed)
+        got = kept_ids(s, out)
+        assert shown <= got, sorted(shown - got)
+        assert not got & inner
+        assert any(r["directed_seen"] for r in rec.details["rounds"][1:])
+    from bake.mesh.hidden import stage as stage_mod
+
+    monkeypatch.setattr(stage_mod, "DIRECTED_EYES", 0)
+    monkeypatch.setattr(stage_mod, "DIRECTED_ROUNDS", 0)
+    out, _ = run(s)
+    assert len(shown - kept_ids(s, out)) > 20 and floor - kept_ids(s, out)
+
+
 def test_a_room_keeps_every_wall_an_inside_eye_sees():
     """The Cornell box from an inside box region: every triangle a held-out inside eye sees in the
     z-buffer is kept; the record's own held-out check agrees (no wrong pixel)."""

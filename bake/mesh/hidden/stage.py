@@ -13,7 +13,11 @@ view region can see, drop the rest (docs/hidden.md).
    triangle, the same budget). Then ``refine_rounds`` rounds aim ``refine`` x ``eyes`` new eyes (on
    the sphere, in the boxes; ``refine`` x more rays from a point or the camera) at the
    unseen triangles that share a corner with one seen so far (the edges of what shows, where a
-   triangle partly seen, such as one crossing another surface, sits).
+   triangle partly seen, such as one crossing another surface, sits). Each round first aims eyes
+   near the *witnesses* of those seen neighbours (the eye of the first ray that drew each): what
+   shows through a gap between parts shows only to a narrow cone of eyes, and a neighbour seen
+   through the gap names one. After the ``refine_rounds``, rounds of witness eyes alone go on
+   (at most ``DIRECTED_ROUNDS``) while they find new triangles, following a surface down a gap.
 3. Lit bakes (``keep_casters``): the hidden triangles that a kept triangle's light rays (towards
    each light, and over the hemisphere with AO, sky or bounces) hit first are kept too: they cast
    the shadows and bounce the light the kept ones show.
@@ -218,6 +222,74 @@ def _unit_perp(w: np.ndarray, turn: float) -> np.ndarray:
     return np.cos(2 * np.pi * turn) * t + np.sin(2 * np.pi * turn) * b
 
 
+# rounds at the edges of what shows: eyes near the witnesses of the seen neighbours (docs/hidden.md)
+DIRECTED_ROUNDS = 256  # at most this many rounds of witness eyes alone, after the refine_rounds
+DIRECTED_EYES = 8  # eyes per witness a candidate gets: the witness itself and 7 around it
+DIRECTED_TURN = 0.05  # radians: how far around an outside witness (a box: this x the box's diagonal)
+GOLDEN_TURN = (np.sqrt(5.0) - 1.0) / 2.0
+
+
+def directed_eyes(regs, witness: np.ndarray, corners: np.ndarray, seen: np.ndarray, fresh: np.ndarray,
+                  cand: np.ndarray, centre: np.ndarray, rng: np.random.Generator
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(eyes, region of each, the candidate each aims at)``: for every candidate and each of its
+    corners, the witnesses of the lowest- and the highest-numbered triangle seen in the last round
+    at that corner (of those seen before when none was), each the witness eye itself and
+    ``DIRECTED_EYES - 1`` eyes around it in its region (turned on the outside sphere by up to
+    ``DIRECTED_TURN``, moved in a box by up to that times its diagonal; a point stays)."""
+    V = int(corners.max()) + 1
+    big = np.iinfo(np.int64).max
+    at_cand = np.zeros(V, bool)
+    at_cand[corners[cand].ravel()] = True
+    near = np.flatnonzero(seen & ~np.isnan(witness[:, 0]) & at_cand[corners].any(axis=1))
+    picks = []
+    for ids in (near[fresh[near]], near):
+        lo = np.full(V, big, np.int64)
+        hi = np.full(V, -1, np.int64)
+        np.minimum.at(lo, corners[ids].ravel(), np.repeat(ids, 3))
+        np.maximum.at(hi, corners[ids].ravel(), np.repeat(ids, 3))
+        picks.append((lo, hi))
+    (flo, fhi), (slo, shi) = picks
+    lo = np.where(flo < big, flo, slo)
+    hi = np.where(fhi >= 0, fhi, shi)
+    cc = corners[cand]
+    w = np.concatenate([lo[cc], np.where(hi[cc] != lo[cc], hi[cc], big)], axis=1)  # (C, 6)
+    ok = (w < big) & (w >= 0)
+    ci, _ = np.nonzero(ok)
+    wt = w[ok]
+    m = len(wt)
+    J = DIRECTED_EYES
+    aim = np.repeat(cand[ci], J)
+    W = np.repeat(witness[wt, :3], J, axis=0)
+    own = np.repeat(witness[wt, 3].astype(np.int64), J)
+    j = np.tile(np.arange(J), m)
+    r1, r2, r3, r4 = (rng.random(m * J) for _ in range(4))
+    rad = np.sqrt((np.maximum(j - 1, 0) + r1) / max(J - 1, 1)) * (j > 0)  # stratified over a disc; 0: the witness
+    out = W.copy()
+    o = np.array([g.kind == "outside" for g in regs] + [False])[own] & (j > 0)
+    if o.any():
+        u = W[o] - centre
+        dist = np.linalg.norm(u, axis=1, keepdims=True)
+        u = u / dist
+        a = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t = np.cross(u, a)
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        bb = np.cross(u, t)
+        phi = 2 * np.pi * (j[o] * GOLDEN_TURN + r2[o])
+        v = u + np.tan(DIRECTED_TURN * rad[o])[:, None] * (np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * bb)
+        out[o] = centre + dist * v / np.linalg.norm(v, axis=1, keepdims=True)
+    for k, g in enumerate(regs):
+        bx = (own == k) & (j > 0)
+        if g.kind == "box" and bx.any():
+            step = DIRECTED_TURN * float(np.linalg.norm(g.hi - g.lo)) * rad[bx]
+            phi = 2 * np.pi * r3[bx]
+            z = 2 * r4[bx] - 1
+            s_ = np.sqrt(1 - z * z)
+            dirn = np.stack([s_ * np.cos(phi), s_ * np.sin(phi), z], axis=1)
+            out[bx] = np.clip(W[bx] + step[:, None] * dirn, g.lo, g.hi)
+    return out, own, aim
+
+
 # ---------------------------------------------------------------------------- the stage
 def _tree_proof(before: Scene, after: Scene, tree: TreeProof) -> dict[str, Any]:
     """The bake's BSP tree built on the stage's input and on its output (the BSP stage itself, on
@@ -272,29 +344,51 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     # a sampled region (outside, a box) has `eyes` eyes with `samples` rays each per triangle; a
     # fixed eye (a point, the camera) has eyes x samples rays per triangle: the same budget
     fixed = np.array([regs[k].kind in FIXED for k in owner], bool)
-    seen, short = vis.targeted(eyes[~fixed], np.arange(T), cfg.samples, cfg.seed, 0)
-    got, cut = vis.targeted(eyes[fixed], np.arange(T), cfg.samples * cfg.eyes, cfg.seed, 1)
+    # per seen triangle its witness: the eye of the first ray that drew it, its region, where it aimed
+    witness = np.full((T, 7), np.nan)
+    seen, short = vis.targeted(eyes[~fixed], np.arange(T), cfg.samples, cfg.seed, 0, witness=witness,
+                               owner=owner[~fixed])
+    got, cut = vis.targeted(eyes[fixed], np.arange(T), cfg.samples * cfg.eyes, cfg.seed, 1, witness=witness,
+                            owner=owner[fixed])
     seen |= got
     short += cut
     rounds = [{"eyes": int(len(eyes)), "candidates": T, "seen": int(seen.sum())}]
     fresh = seen.copy()
     corners = corner_ids(pos, scene.triangles)
-    for r in range(cfg.refine_rounds if cfg.refine > 0 else 0):
+    c_sph, _ = regions_mod.bounding_sphere(pos[used])
+    n_rounds = cfg.refine_rounds if cfg.refine > 0 else 0
+    for r in range(n_rounds + (DIRECTED_ROUNDS if n_rounds else 0)):
         cand = np.flatnonzero(neighbours(corners, fresh) & ~seen)
         if len(cand) == 0:
             break
-        # sampled regions (outside, boxes) get refine x more eyes; an eye at a point refine x more rays
-        more, more_owner = regions_mod.eyes(regs, pos[used], cfg.eyes * cfg.refine,
-                                            np.random.default_rng([cfg.seed, 2, r]))
-        fixed = np.array([regs[k].kind in FIXED for k in more_owner], bool)
-        got, cut = vis.targeted(more[~fixed], cand, cfg.samples, cfg.seed, 2 * r + 2, corners=True)
-        got2, cut2 = vis.targeted(more[fixed], cand, cfg.samples * cfg.eyes * cfg.refine, cfg.seed, 2 * r + 3,
-                                  corners=True)
-        got |= got2
-        short += cut + cut2
-        fresh = got & ~seen
+        # eyes near those that saw a neighbour (witnesses): what shows through a gap shows to a
+        # narrow cone of eyes, and a neighbour seen through the same gap names one of them
+        w_eyes, w_owner, w_aim = directed_eyes(regs, witness, corners, seen, fresh, cand, c_sph,
+                                              np.random.default_rng([cfg.seed, 5, r]))
+        got, cut = vis.directed(w_eyes, w_aim, cfg.samples, cfg.seed, 1_000_003 + r, witness=witness,
+                                owner=w_owner)
+        short += cut
+        n_dir = int((got & ~seen).sum())
+        seen_before = seen.copy()
         seen |= got
-        rounds.append({"eyes": int(len(more)), "candidates": int(len(cand)), "seen": int(fresh.sum())})
+        entry = {"candidates": int(len(cand)), "eyes": 0, "directed_eyes": int(len(w_eyes)), "directed_seen": n_dir}
+        left = cand[~seen[cand]]
+        if r < n_rounds and len(left):
+            # sampled regions (outside, boxes) get refine x more eyes; an eye at a point refine x more rays
+            more, more_owner = regions_mod.eyes(regs, pos[used], cfg.eyes * cfg.refine,
+                                                np.random.default_rng([cfg.seed, 2, r]))
+            fixed = np.array([regs[k].kind in FIXED for k in more_owner], bool)
+            got, cut = vis.targeted(more[~fixed], left, cfg.samples, cfg.seed, 2 * r + 2, corners=True,
+                                    witness=witness, owner=more_owner[~fixed])
+            got2, cut2 = vis.targeted(more[fixed], left, cfg.samples * cfg.eyes * cfg.refine, cfg.seed, 2 * r + 3,
+                                      corners=True, witness=witness, owner=more_owner[fixed])
+            got |= got2
+            short += cut + cut2
+            seen |= got
+            entry["eyes"] = int(len(more))
+        fresh = seen & ~seen_before
+        entry["seen"] = int(fresh.sum())
+        rounds.append(entry)
         if not fresh.any():
             break
     if not seen.any():

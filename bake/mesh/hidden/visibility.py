@@ -13,7 +13,9 @@ Three uses, each a batch of rays cut into fixed chunks (deterministic for any th
 chunk's random numbers come from its own ``(seed, stream, chunk)`` generator):
 
 * :meth:`Visibility.targeted`: from every eye, ``samples`` rays at stratified points of each
-  candidate triangle that could face it;
+  candidate triangle that could face it (:meth:`Visibility.directed`: the same for explicit
+  (eye, triangle) pairs); each records, per triangle it sees first, its *witness*: the eye of
+  the lowest-numbered ray that drew it and where that ray was aimed;
 * :meth:`Visibility.pixels`: a pixel grid from each held-out eye (a view holding the model from an
   outside eye, a cube map around an eye in a box or at a point), and the pixels whose ray draws a
   dropped triangle (the proof);
@@ -47,6 +49,18 @@ def stratified_barycentric(k: int, r1: np.ndarray, r2: np.ndarray) -> np.ndarray
     v = np.mod(r2[:, None] + j[None, :] * GOLDEN, 1.0)
     s = np.sqrt(u)
     return np.stack([1.0 - s, s * (1.0 - v), s * v], axis=-1)
+
+
+def _lowest(prims: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct triangles of ``prims`` and, for each, the index of its lowest ``key`` (keys
+    distinct and >= 0): one sort of ``prims x (max key + 1) + key``."""
+    if len(prims) == 0:
+        return prims, np.zeros(0, np.int64)
+    order = np.argsort(prims * (int(key.max()) + 1) + key)
+    p = prims[order]
+    first = np.ones(len(order), bool)
+    first[1:] = p[1:] != p[:-1]
+    return p[first], order[first]
 
 
 class Visibility:
@@ -97,14 +111,16 @@ class Visibility:
 
     # ------------------------------------------------------------------ deciding
     def targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
-                 batch: int = 8, corners: bool = False) -> tuple[np.ndarray, int]:
+                 batch: int = 8, corners: bool = False, witness: np.ndarray | None = None,
+                 owner: np.ndarray | None = None) -> tuple[np.ndarray, int]:
         """``(seen (T,) bool, rays cut short)``: from every eye, ``samples`` rays at stratified
         points of each candidate triangle whose front faces the eye (or that is two-sided). The
         eyes go in batches of ``batch``; a batch aims only at the candidates no batch before it saw
         (a triangle seen once is decided), so a dropped triangle was aimed at from every eye.
         ``corners``: also aim just inside each corner (``CORNER_INSET`` of the way to the others):
         the piece of a triangle that pokes out through another surface holds a corner unless
-        the surface bulges through the triangle's middle."""
+        the surface bulges through the triangle's middle. ``witness``: see :meth:`_witness`
+        (``owner``: the region of each eye)."""
         seen = np.zeros(self.T, bool)
         short = 0
         cand = np.asarray(candidates, np.int64)
@@ -112,30 +128,69 @@ class Visibility:
         while first < len(eyes) and len(cand):
             # at least `batch` eyes, and enough for a batch of MIN_BATCH_RAYS rays (few candidates)
             n = max(batch, -(-MIN_BATCH_RAYS // (len(cand) * (samples + 3 * corners))))
-            got, cut = self._targeted(eyes[first:first + n], cand, samples, seed, stream * 4099 + b, corners)
+            ee = eyes[first:first + n]
+            C = len(cand)
+            has = None if witness is None else ~np.isnan(witness[:, 0])
+            got, hit, cut = self._aim(ee, cand, len(ee) * C, lambda q, C=C: (q // C, q % C), samples, seed,
+                                      stream * 4099 + b, corners, has)
+            if witness is not None:
+                self._witness(witness, hit, ee, None if owner is None else owner[first:first + n],
+                              lambda q, C=C: q // C)
             seen |= got
             short += cut
             cand = cand[~seen[cand]]
             first, b = first + n, b + 1
         return seen, short
 
-    def _targeted(self, eyes: np.ndarray, candidates: np.ndarray, samples: int, seed: int, stream: int,
-                  corners: bool) -> tuple[np.ndarray, int]:
-        cand = np.asarray(candidates, np.int64)
-        E, C = len(eyes), len(cand)
+    def directed(self, eyes: np.ndarray, aim: np.ndarray, samples: int, seed: int, stream: int,
+                 witness: np.ndarray | None = None, owner: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """``(seen (T,) bool, rays cut short)``: from each eye ``eyes[i]``, ``samples`` rays at
+        stratified points of triangle ``aim[i]`` and one just inside each of its corners (if it
+        could face the eye): explicit (eye, triangle) pairs, in one batch."""
+        aim = np.asarray(aim, np.int64)
+        if len(aim) == 0:
+            return np.zeros(self.T, bool), 0
+        has = None if witness is None else ~np.isnan(witness[:, 0])
+        seen, hit, cut = self._aim(eyes, aim, len(aim), lambda q: (q, q), samples, seed, stream, True, has)
+        if witness is not None:
+            self._witness(witness, hit, eyes, owner, lambda q: q)
+        return seen, cut
+
+    @staticmethod
+    def _witness(witness: np.ndarray, hit, eyes: np.ndarray, owner: np.ndarray | None, eye_of) -> None:
+        """``witness`` (T, 7), NaN where none yet: for each triangle a batch saw that has none, the
+        eye of the batch's lowest-numbered ray that drew it, that eye's region (``owner``) and the
+        point the ray was aimed at (the rays of every work item: the answer is the same for any
+        thread count)."""
+        prims, key, target, k = hit
+        q = eye_of(key // k)
+        witness[prims, :3] = eyes[q]
+        witness[prims, 3] = -1.0 if owner is None else owner[q]
+        witness[prims, 4:7] = target
+
+    def _aim(self, eyes: np.ndarray, cand: np.ndarray, P: int, pair, samples: int, seed: int, stream: int,
+             corners: bool, has: np.ndarray | None = None
+             ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray, int], int]:
+        """The rays of ``P`` (eye, candidate) pairs, ``pair(q) -> (eye numbers, candidate numbers)``:
+        ``(seen (T,), (triangles drawn that ``has`` (a witness already) is not true of, the lowest
+        ray number that drew each, where that ray was aimed, rays per pair), rays cut short)``."""
+        cand = np.asarray(cand, np.int64)
+        kk = samples + 3 * corners
         seen = np.zeros(self.T, bool)
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         short = [0]
-        if E == 0 or C == 0:
-            return seen, 0
+        none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), kk)
+        if P == 0:
+            return seen, none, 0
         # the random numbers: one generator per CHUNK_RAYS rays of pairs, as drawn up front; the
         # work goes in smaller items (DECIDE_CHUNK_RAYS: both threads busy on a small batch)
-        rng_per = max(1, CHUNK_RAYS // (samples + 3 * corners))
-        R1, R2 = np.empty(E * C), np.empty(E * C)
-        for s0 in range(0, E * C, rng_per):
+        rng_per = max(1, CHUNK_RAYS // kk)
+        R1, R2 = np.empty(P), np.empty(P)
+        for s0 in range(0, P, rng_per):
             rng = np.random.default_rng([seed, stream, s0 // rng_per])
-            n = min(E * C, s0 + rng_per) - s0
+            n = min(P, s0 + rng_per) - s0
             R1[s0:s0 + n], R2[s0:s0 + n] = rng.random(n), rng.random(n)
-        per = max(1, DECIDE_CHUNK_RAYS // (samples + 3 * corners))
+        per = max(1, DECIDE_CHUNK_RAYS // kk)
         lock = threading.Lock()
         # the candidates' corners, normals and sidedness gathered once per batch, not once per ray
         cc = self.corners[cand]
@@ -144,7 +199,7 @@ class Visibility:
 
         def work(a: int, b: int) -> None:
             q = np.arange(a, b)
-            e, j = q // C, q % C
+            e, j = pair(q)
             r1, r2 = R1[a:b], R2[a:b]
             rel = eyes[e] - c0[j]
             ok = np.flatnonzero((np.einsum("ij,ij->i", cn[j], rel) > 0) | c2[j])
@@ -158,17 +213,30 @@ class Visibility:
             o = np.repeat(eyes[e], k, axis=0)
             d = target - o
             ln = np.linalg.norm(d, axis=1)
-            good = ln > 0
+            good = np.flatnonzero(ln > 0)
             d = d[good] / ln[good, None]
-            _, prims, cut = self.chain(o[good], d)
+            rays, prims, cut = self.chain(o[good], d)
             mine = np.zeros(self.T, bool)
             mine[prims] = True
+            if has is not None:  # the witnesses of the triangles that have none yet
+                new = np.flatnonzero(~has[prims])
+                row = good[rays[new]]
+                key = (a + ok[row // k]) * k + row % k  # the ray's number in the batch
+                up, first = _lowest(prims[new], key)
             with lock:
                 np.logical_or(seen, mine, out=seen)
+                if has is not None:
+                    parts.append((up, key[first], target[row[first]]))
                 short[0] += cut
 
-        parallel(E * C, per, work, self.tracer.threads)
-        return seen, short[0]
+        parallel(P, per, work, self.tracer.threads)
+        if not parts:
+            return seen, none, short[0]
+        prims = np.concatenate([x[0] for x in parts])
+        key = np.concatenate([x[1] for x in parts])
+        target = np.concatenate([x[2] for x in parts])
+        up, first = _lowest(prims, key)
+        return seen, (up, key[first], target[first], kk), short[0]
 
     # ------------------------------------------------------------------ the proof
     @staticmethod

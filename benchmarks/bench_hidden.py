@@ -138,11 +138,13 @@ def run_model(key: str, holdout: int, folder: Path | None = None) -> dict:
     if key == "subpass_scene":
         # the floor of the cost (issue 42): fewer refinement eyes, what they cost and what they miss
         row["refine_sweep"] = []
-        for refine in (0, 2, 4, 8):
-            c2 = pipeline.load_config_for(path, base + sets + [f"mesh.hidden.refine={refine}"])
+        # (and fewer first-pass eyes with no refinement: the stage near the AO-64's own cost)
+        for eyes, refine in ((64, 0), (64, 2), (64, 4), (64, 8), (8, 0), (16, 0)):
+            c2 = pipeline.load_config_for(path, base + sets + [f"mesh.hidden.refine={refine}",
+                                                               f"mesh.hidden.eyes={eyes}"])
             _, r2 = hidden_stage(cleaned, job(c2))
             row["refine_sweep"].append({
-                "refine": refine, "eyes_a_round": r2.details["rounds"][1]["eyes"] if refine else 0,
+                "eyes": eyes, "refine": refine, "eyes_a_round": r2.details["rounds"][1]["eyes"] if refine else 0,
                 "decide_rays": r2.details["rays"], "decide_seconds": r2.details["decide_seconds"],
                 "decide_over_ao64": round(r2.details["decide_seconds"] / max(ao_wall, 1e-9), 3),
                 "dropped": r2.details["dropped"], "wrong_pixels": r2.details["holdout"]["wrong_pixels"],

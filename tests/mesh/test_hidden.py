@@ -64,6 +64,17 @@ def run(scene, **kw):
     return stage(scene, HiddenJob(hidden=HiddenConfig(enabled=True, **kw), lighting=lighting))
 
 
+def assert_same_picture(s, tri, seed):
+    """A z-buffer of the triangles ``tri`` (corner positions) draws the depths of the whole scene
+    ``s`` from 8 outside eyes (bar pixel centres on a cut edge, which may fall either way)."""
+    c, r = regions.bounding_sphere(s.positions)
+    for d in regions.sphere_eyes(8, np.random.default_rng(seed)):
+        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
+        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
+        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
+        assert same.mean() > 0.995
+
+
 def kept_ids(scene, out) -> set[int]:
     """Input triangle numbers the output kept (matched by corner positions)."""
     key = lambda s: [tuple(np.round(c, 9).ravel()) for c in s.triangle_vertices()]
@@ -538,12 +549,7 @@ def test_trimming_drops_the_inside_of_a_peg_and_leaves_the_picture_as_it_was():
     assert area.sum() == pytest.approx(6 * 16 - 1 + 5, rel=1e-9)
     # without trimming only the peg's bottom (inside the box) goes: every crossing triangle shows a part
     assert plain.n_triangles == s.n_triangles - 2
-    c, r = regions.bounding_sphere(s.positions)
-    for d in regions.sphere_eyes(8, np.random.default_rng(4)):
-        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
-        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
-        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
-        assert same.mean() > 0.995  # (pixel centres on a cut edge may fall either way)
+    assert_same_picture(s, tri, seed=4)
 
 
 def test_trimming_cuts_only_where_the_crossings_are():
@@ -568,12 +574,7 @@ def test_trimming_cuts_only_where_the_crossings_are():
     assert area[top].sum() == pytest.approx(64 - 3, rel=1e-12)
     assert area.sum() == pytest.approx(2 * 64 + 4 * 16 - 3 + 3 * 5, rel=1e-12)
     assert 20 <= top.sum() <= 24
-    c, r = regions.bounding_sphere(s.positions)
-    for d in regions.sphere_eyes(8, np.random.default_rng(5)):
-        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
-        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
-        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
-        assert same.mean() > 0.995  # (pixel centres on a cut edge may fall either way)
+    assert_same_picture(s, tri, seed=5)
 
 
 def test_a_source_whose_kept_part_takes_more_than_trim_most_triangles_is_written_whole():
@@ -595,12 +596,7 @@ def test_a_source_whose_kept_part_takes_more_than_trim_most_triangles_is_written
     assert len(crossing_pairs(out.positions, out.triangles, 1e-9)) == 0
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     assert area[top].sum() == pytest.approx(64.0, rel=1e-12)
-    c, r = regions.bounding_sphere(s.positions)
-    for d in regions.sphere_eyes(8, np.random.default_rng(5)):
-        cam = Camera(tuple(c + 2.5 * r * d), tuple(c), fov=50.0, width=120, height=120)
-        a, b = render(cam, s.triangle_vertices()), render(cam, tri)
-        same = np.isclose(a.depth, b.depth, rtol=1e-9, atol=1e-9) | (np.isinf(a.depth) & np.isinf(b.depth))
-        assert same.mean() > 0.995
+    assert_same_picture(s, tri, seed=5)
 
 
 def test_outline_joins_pieces_across_a_cut_that_stops_inside_them():

@@ -99,7 +99,9 @@ def cut(scene: Scene, pairs: np.ndarray, eps: float) -> dict:
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     off = np.einsum("ij,ij->i", n, corners[:, 0])
     cut_tris = np.unique(tri)
-    K = 3 + kmax
+    # the pieces' corners, as wide as the piece with the most needs (a triangle crossed by hundreds
+    # of others is cut by hundreds of planes, but each piece keeps a few corners)
+    K = 4
     bary = np.zeros((len(cut_tris), K, 3))
     bary[:, :3] = np.eye(3)
     count = np.full(len(cut_tris), 3, np.int64)
@@ -111,6 +113,9 @@ def cut(scene: Scene, pairs: np.ndarray, eps: float) -> dict:
         act = np.flatnonzero(p >= 0)
         if len(act) == 0:
             continue
+        if int(count[act].max()) + 1 > K:  # a cut adds at most one corner
+            bary = np.concatenate([bary, np.zeros((len(bary), int(count[act].max()) + 1 - K, 3))], axis=1)
+            K = bary.shape[1]
         pos = np.einsum("nkc,ncx->nkx", bary[act], corners[src[act]])
         d = np.einsum("nkx,nx->nk", pos, n[p[act]]) - off[p[act]][:, None]
         d[np.abs(d) < eps] = 0.0

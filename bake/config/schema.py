@@ -10,6 +10,7 @@ constants live with the stage (``StageSpec.check``).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Literal
@@ -140,12 +141,14 @@ class SimplifyConfig:
 class HiddenBox:
     """A box of eyes for the hidden-geometry stage (scene coordinates, as transformed)."""
 
-    min: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    max: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    min: list[float] = field(default_factory=list)  # both must be given: [x, y, z]
+    max: list[float] = field(default_factory=list)
 
     def check(self, need: Need) -> None:
-        need(len(self.min) == 3, "min", f"must be [x, y, z] (got {self.min!r})")
-        need(len(self.max) == 3, "max", f"must be [x, y, z] (got {self.max!r})")
+        for key, v in (("min", self.min), ("max", self.max)):
+            need(len(v) == 3, key, f"must be [x, y, z] (got {v!r})" if v else "is missing: give it as [x, y, z]")
+            need(all(math.isfinite(x) and abs(x) <= 1e15 for x in v), key,
+                 f"must be finite coordinates of at most 1e15 (got {v!r})")
         need(all(a <= b for a, b in zip(self.min, self.max)), "max",
              f"must be >= min in every coordinate (min = {self.min!r}, max = {self.max!r})")
 
@@ -199,6 +202,8 @@ class HiddenConfig:
              "[[mesh.hidden.boxes]]")
         for i, p in enumerate(self.points):
             need(len(p) == 3, f"points[{i}]", f"must be [x, y, z] (got {p!r})")
+            need(all(math.isfinite(x) and abs(x) <= 1e15 for x in p), f"points[{i}]",
+                 f"must be finite coordinates of at most 1e15 (got {p!r})")
         need(1 <= self.eyes <= 100_000, "eyes", f"must be between 1 and 100000 (got {self.eyes})")
         need(1 <= self.samples <= 64, "samples", f"must be between 1 and 64 (got {self.samples})")
         need(self.trim_most >= 0, "trim_most", f"must be 0 (no limit) or more (got {self.trim_most})")
@@ -210,6 +215,7 @@ class HiddenConfig:
         need(2 <= self.holdout_pixels <= 512, "holdout_pixels",
              f"must be between 2 and 512 (got {self.holdout_pixels})")
         need(0 <= self.pictures <= 16, "pictures", f"must be between 0 and 16 (got {self.pictures})")
+        need(self.seed >= 0, "seed", f"must be >= 0 (got {self.seed})")
         need(self.threads >= 0, "threads", f"must be >= 0 (0 = all cores; got {self.threads})")
 
 
@@ -266,6 +272,7 @@ class BSPConfig:
 
     def check(self, need: Need) -> None:
         need(self.candidates >= 0, "candidates", "must be >= 0 (0 = all)")
+        need(self.seed >= 0, "seed", f"must be >= 0 (got {self.seed})")
         need(self.leaf_max >= 1, "leaf_max", "must be >= 1")
         need(0 < self.epsilon < 1e-2, "epsilon", "must be > 0 and < 0.01")
         need(0 <= self.min_area < 1e-4, "min_area", "must be >= 0 and < 1e-4")

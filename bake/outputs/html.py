@@ -339,9 +339,11 @@ def _tie(report: dict, mesh) -> float:
     return tie_tolerance(epsilon, None if decimals is None else int(decimals), size or 1.0)
 
 
-def _png_width(b64: str) -> int:
-    """The width of a base64 PNG (its IHDR chunk)."""
-    return int.from_bytes(base64.b64decode(b64[:32])[16:20], "big")
+def _shown_width(b64: str) -> int:
+    """The width to show a stage's base64 PNG at: 3 screen pixels per pixel for a small one, its
+    own size for a wide one (a cube map's six faces side by side), so it fits the page."""
+    w = int.from_bytes(base64.b64decode(b64[:32])[16:20], "big")  # the IHDR chunk's width
+    return 3 * w if w <= 200 else w
 
 
 def _stage_sections(report: dict) -> list[str]:
@@ -367,7 +369,7 @@ def _stage_sections(report: dict) -> list[str]:
                                             for c, n in zip(row, num)) + "</tr>" for row in sec.table)
             html_ += f"<p class=sub>{_esc(sec.note)}</p><table><tr>{head}</tr>{rows}</table>"
         if sec.images:
-            figs = "".join(f"<figure><img alt='{_esc(c)}' style='image-rendering:pixelated;width:{3 * _png_width(b)}px' "
+            figs = "".join(f"<figure><img alt='{_esc(c)}' style='image-rendering:pixelated;width:{_shown_width(b)}px' "
                            f"src='data:image/png;base64,{b}'><figcaption>{_esc(c)}</figcaption></figure>"
                            for c, b in sec.images)
             html_ += f"<div class=views>{figs}</div>"

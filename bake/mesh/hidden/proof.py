@@ -1,7 +1,8 @@
 """The report's pictures of the hidden stage's proof: what a held-out eye sees with and without
 the removal (docs/hidden.md, "The proof").
 
-For a few held-out eyes (the ones with the most wrong pixels first, then the first drawn), the
+For a few held-out eyes (the ones with the most wrong pixels first, then eyes spread over the
+rest), the
 same pixel rays as the wrong-pixel count go once through the full mesh and once through the kept
 triangles alone, with the stage's drawing rules (:meth:`Visibility.chain`). Each pixel takes the
 colour of the nearest triangle its ray draws (the material's or the face's colour, shaded by the
@@ -23,7 +24,7 @@ import numpy as np
 from ...scene import Scene
 from .visibility import Visibility
 
-BACKGROUND = np.array([244, 244, 240], np.uint8)
+BACKGROUND = np.array([186, 198, 214], np.uint8)  # a pale blue: white and grey models stand out
 WRONG = np.array([230, 20, 20], np.uint8)
 
 
@@ -77,6 +78,19 @@ def png_base64(img: np.ndarray) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
+def _choose(wrong: np.ndarray, count: int) -> np.ndarray:
+    """The eyes to picture: those with wrong pixels, most first, then eyes spread evenly over the
+    held-out ones (the outside eyes run from one pole of the sphere to the other, so the first few
+    would all look from above)."""
+    n = len(wrong)
+    bad = np.flatnonzero(wrong > 0)
+    bad = bad[np.lexsort((bad, -wrong[bad]))]
+    spread = (np.arange(count) * n) // max(count, 1) + n // (2 * max(count, 1))
+    rest = [int(i) for i in spread if i not in set(bad.tolist())]
+    rest += [i for i in range(n) if i not in set(rest) and i not in set(bad.tolist())]
+    return np.array((bad.tolist() + rest)[:count], np.int64)
+
+
 def pictures(scene: Scene, vis: Visibility, kept: np.ndarray, eyes: np.ndarray, views: list[np.ndarray],
              wrong_per_eye: np.ndarray, pixels: int, count: int, *, two_sided: np.ndarray,
              see_through: np.ndarray) -> list[dict]:
@@ -84,7 +98,7 @@ def pictures(scene: Scene, vis: Visibility, kept: np.ndarray, eyes: np.ndarray, 
     mesh (``vis``, every triangle of ``scene``), the kept triangles (``kept``), and the difference."""
     if count <= 0 or len(eyes) == 0:
         return []
-    order = np.lexsort((np.arange(len(eyes)), -np.asarray(wrong_per_eye)))[:count]
+    order = _choose(np.asarray(wrong_per_eye), count)
     keep_ids = np.flatnonzero(kept)
     colour = base_colours(scene)
     normal = vis.normal

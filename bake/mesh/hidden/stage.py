@@ -173,10 +173,12 @@ def keep_triangles(scene: Scene, keep: np.ndarray) -> Scene:
         poly_material=poly_material, poly_uvs=poly_uvs)
 
 
-def _camera_eye(scene: Scene) -> np.ndarray:
+def _camera_eye(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Where the reader sprite's green flag puts its camera for these triangles (it frames the
+    vertices the lists hold: ``bake.scratch.project.auto_camera``)."""
     from ...scratch.project import auto_camera
 
-    cam = auto_camera(scene.positions[scene.used_vertex_mask()])
+    cam = auto_camera(positions[np.unique(triangles)])
     return np.array([cam.x, cam.y, cam.z], np.float64)
 
 
@@ -210,6 +212,7 @@ def _lights(scene: Scene, lighting: LightingConfig, rng: np.random.Generator
 TRIM_EPS = 1e-6  # trimming: a corner this close to a cutting plane (x the diagonal) is on it
 TRIM_MIN_AREA = 1e-12  # pieces smaller than this x the diagonal squared are left out
 FIXED = ("point", "camera")  # regions of one eye
+CAMERA_ROUNDS = 8  # at most this many moves of the reader's camera as what is kept changes
 CONE_RAYS = 8  # more rays across a soft sun's disc or a light's sphere
 MAX_LEVEL = 8  # a kept triangle's points for the casters: at most an 8 x 8 cut (64 centroids)
 
@@ -320,7 +323,7 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         rec.idle = "no triangles"
         return scene, rec
     original = scene
-    camera = _camera_eye(scene) if cfg.camera else None
+    camera = _camera_eye(scene.positions, scene.triangles) if cfg.camera else None
     # ---- trimming: crossing triangles cut along each other's planes, decided piece by piece
     trimmed = None
     if cfg.trim:
@@ -408,6 +411,27 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         casters = int((hit & ~keep).sum())
         keep |= hit
 
+    # ---- the camera region: the reader frames what is written (auto_camera of the kept vertices),
+    # so the camera moves as triangles drop: decide again from where it moves to, until it stays
+    camera_moves = 0
+    if camera is not None:
+        k_cam = next(i for i, g in enumerate(regs) if g.kind == "camera")
+        for _ in range(CAMERA_ROUNDS):
+            eye = _camera_eye(scene.positions, scene.triangles[keep])
+            if np.array_equal(eye, regs[k_cam].lo):
+                break
+            regs[k_cam] = regions_mod.Region("camera", regs[k_cam].label, lo=eye)
+            camera_moves += 1
+            got, cut = vis.targeted(eye[None, :], np.flatnonzero(~keep), cfg.samples * cfg.eyes * (1 + cfg.refine),
+                                    cfg.seed, 9000 + camera_moves, witness=witness, owner=np.array([k_cam]))
+            short += cut
+            seen |= got
+            keep |= got
+        else:
+            rec.warn(f"mesh.hidden.camera: the reader's camera still moved after {CAMERA_ROUNDS} rounds of deciding "
+                     "from where it moves to: what the last move shows may be dropped (use a box around it)")
+        camera = regs[k_cam].lo
+
     dropped = ~keep
     trim_info: dict[str, Any] | None = None
     if trimmed is not None:
@@ -449,6 +473,9 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
                                                cfg.holdout_pixels, min(cfg.pictures, len(held)),
                                                two_sided=sided, see_through=clear)
         proof["seconds"] = round(time.perf_counter() - t1, 6)
+        if px["covered"] == 0:
+            rec.warn("the held-out eyes saw none of the model (no pixel shows it): the proof measured nothing; "
+                     "move the points or boxes closer")
         rec.accuracy["wrong_pixels"] = float(px["wrong"])
         rec.accuracy["wrong_pixel_share"] = px["wrong"] / max(px["covered"], 1)
         if px["wrong"]:
@@ -464,7 +491,7 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
                       "materials": len(out.materials)}
     rec.details = {
         "regions": [{"kind": g.kind, "label": g.label, "eyes": int((owner == i).sum())} for i, g in enumerate(regs)],
-        "eyes": int(len(eyes)), "samples": cfg.samples, "rounds": rounds,
+        "eyes": int(len(eyes)), "eyes_per_region": cfg.eyes, "samples": cfg.samples, "rounds": rounds,
         "seen": int(seen.sum()), "casters_kept": casters, "dropped": int(dropped.sum()),
         "vertices_dropped": original.n_vertices - out.n_vertices,
         "see_through_triangles": int(clear.sum()), "see_through_materials": clear_names,
@@ -482,6 +509,7 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         rec.details["bsp"] = tree
     if camera is not None:
         rec.details["camera_eye"] = [float(x) for x in camera]
+        rec.details["camera_moves"] = camera_moves
     if cfg.camera and camera is None:
         rec.warn("mesh.hidden.camera: no camera eye (the model has no vertices)")
     if short:
@@ -490,28 +518,56 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
     return out, rec
 
 
+def _bytes_estimate(d: dict[str, Any], st: dict[str, Any], report: dict[str, Any] | None) -> tuple[str, str] | None:
+    """The report's row on the bytes the removal saves: an estimate from this bake's lists (each
+    list that holds a value per written vertex or per written triangle, scaled by the vertices or
+    triangles dropped), or why there is none."""
+    stages = {x.get("name"): x for x in (report or {}).get("stages", [])}
+    ex = stages.get("export")
+    if ex is None:
+        return None
+    if "bsp" in stages:
+        return ("bytes saved", "not estimated: the BSP tree's splits change with what is dropped (the BSP row "
+                "below); bake with mesh.hidden.enabled = false and compare project.json for the figure")
+    v_w, t_w = (ex.get("counts_in") or {}).get("vertices", 0), (ex.get("counts_in") or {}).get("triangles", 0)
+    dv = st["counts_in"]["vertices"] - st["counts_out"]["vertices"]
+    dt = st["counts_in"]["triangles"] - st["counts_out"]["triangles"]
+    est = 0.0
+    for v in ((ex.get("details") or {}).get("lists") or {}).values():
+        per = int(v.get("items", 0)) // max(int(v.get("stride", 1)), 1)
+        if v_w and per == v_w:
+            est += v["project_json_bytes"] * dv / v_w
+        elif t_w and per in (t_w, 3 * t_w):
+            est += v["project_json_bytes"] * dt / t_w
+    how = ("this bake's per-vertex and per-triangle lists scaled by the vertices and triangles dropped (textures "
+           "and other lists unchanged); bake with mesh.hidden.enabled = false for the exact figure")
+    return ("bytes saved (estimate)", f"about {round(est):,} bytes of project.json: {how}" if est >= 0 else
+            f"none: about {round(-est):,} bytes more (trimming's pieces outnumber what it drops): {how}")
+
+
 def section(st: dict[str, Any], report: dict[str, Any] | None = None) -> ReportSection | None:
     """The stage's section of report.html, from its entry in report.json (and the export's, for
     the bytes)."""
     d = st.get("details") or {}
     if "seen" not in d:
         return None
-    t_in = (st.get("counts_in") or {}).get("triangles", 0)
-    t_out = (st.get("counts_out") or {}).get("triangles", 0)
+    ci, co = st.get("counts_in") or {}, st.get("counts_out") or {}
     regs = ", ".join(f"{r['label']} ({r['eyes']} eye{'s' if r['eyes'] != 1 else ''})" for r in d["regions"])
-    rows = [("triangles", f"{t_in:,} → {t_out:,} ({d['dropped']:,} dropped, {d['vertices_dropped']:,} vertices; "
-                          f"{d['casters_kept']:,} hidden kept as shadow or bounce casters)"),
+    trim = d.get("trim")
+    what = (f"{d['dropped']:,} of the triangles and trimmed pieces dropped (trimming cut {trim['triangles_cut']:,} "
+            f"crossing triangles into {trim['pieces']:,} pieces)" if trim else f"{d['dropped']:,} dropped")
+    rows = [("triangles", f"{ci.get('triangles', 0):,} → {co.get('triangles', 0):,}; vertices "
+                          f"{ci.get('vertices', 0):,} → {co.get('vertices', 0):,}; {what}; "
+                          f"{d['casters_kept']:,} hidden kept as shadow or bounce casters"),
             ("view region", regs),
-            ("sampling", f"{d['samples']} rays per eye and triangle; {d['rays']:,} rays in "
-                         f"{d['decide_seconds']:.2f} s; {len(d['rounds']) - 1} refinement round(s)")]
-    ex = next((x for x in (report or {}).get("stages", []) if x.get("name") == "export"), None)
-    lists = ((ex or {}).get("details") or {}).get("lists") or {}
-    list_bytes = sum(int(v.get("project_json_bytes", 0)) for v in lists.values())
-    if list_bytes and t_out and t_in > t_out:
-        rows.append(("bytes saved (estimate)", f"about {round(list_bytes * (t_in - t_out) / t_out):,} bytes of "
-                     f"project.json: this bake's lists ({list_bytes:,} bytes for the {t_out:,} triangles kept "
-                     f"here) scaled to the {t_in - t_out:,} dropped; bake with mesh.hidden.enabled = false for "
-                     "the exact figure"))
+            ("sampling", f"{d['samples']} rays per eye and triangle"
+                         + (f" ({d['samples'] * d['eyes_per_region']:,} from an eye at a point or the camera)"
+                            if any(r["kind"] in FIXED for r in d["regions"]) and "eyes_per_region" in d else "")
+                         + f"; {d['rays']:,} rays in {d['decide_seconds']:.2f} s; {len(d['rounds']) - 1} "
+                           "refinement round(s)")]
+    saved = _bytes_estimate(d, st, report)
+    if saved:
+        rows.append(saved)
     h = d.get("holdout") or {}
     if h.get("eyes"):
         rows.append(("held-out proof", f"{h['wrong_pixels']:,} wrong of {h['pixels_showing_the_model']:,} pixels "
@@ -522,8 +578,9 @@ def section(st: dict[str, Any], report: dict[str, Any] | None = None) -> ReportS
         a, b = tree["without_removal"], tree["with_removal"]
         rows.append(("BSP splits", f"without the removal {a['triangles_in']:,} → {a['triangles_out']:,} triangles "
                      f"({a['inflation']:+.1%}); with it {b['triangles_in']:,} → {b['triangles_out']:,} "
-                     f"({b['inflation']:+.1%}): the [bsp] settings on this stage's input and output, "
-                     f"before simplify and lighting ({tree['seconds']:.2f} s)"))
+                     f"({b['inflation']:+.1%}): the [bsp] settings on this stage's input and output, before the "
+                     f"textures, simplify and lighting stages (this bake's own tree is in the BSP section; "
+                     f"{tree['seconds']:.2f} s)"))
     out = ReportSection("Hidden geometry: what no eye sees", rows)
     for p in h.get("pictures") or []:
         where = f"held-out eye {p['eye']} ({p['wrong_pixels']:,} wrong pixels)"

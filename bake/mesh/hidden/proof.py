@@ -70,6 +70,36 @@ def _layout(px: np.ndarray, P: int) -> np.ndarray:
     return np.concatenate(list(faces), axis=1)
 
 
+def nearest_depth(vis: Visibility, eye: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """(N,) the distance along each pixel ray from ``eye`` to the nearest triangle it draws (inf:
+    none), float64 from that triangle's plane."""
+    tri = nearest(vis, eye, dirs)[0]
+    out = np.full(len(dirs), np.inf)
+    hit = tri >= 0
+    t = tri[hit]
+    n, v0 = vis.normal[t], vis.corners[t, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out[hit] = np.einsum("ij,ij->i", n, v0 - eye) / np.einsum("ij,ij->i", n, dirs[hit])
+    return out
+
+
+def depths_differ(model: Visibility, written: Visibility, eyes: np.ndarray, views: list[np.ndarray],
+                  tol: float) -> tuple[int, int]:
+    """Trimmed output against the model: ``(pixels whose nearest drawn surface is not at the same
+    depth, by more than ``tol``, pixels showing the model)`` over the held-out views. Trimming
+    writes other triangles than it decided on (sources whole again, outlines redrawn), so this
+    checks what is written, not the pieces."""
+    bad = shown = 0
+    for e, d in zip(eyes, views):
+        a, b = nearest_depth(model, e, d), nearest_depth(written, e, d)
+        both = np.isfinite(a) & np.isfinite(b)
+        differ = np.isfinite(a) != np.isfinite(b)
+        differ[both] |= np.abs(a[both] - b[both]) > tol
+        bad += int(differ.sum())
+        shown += int(np.isfinite(a).sum())
+    return bad, shown
+
+
 def png_base64(img: np.ndarray) -> str:
     from PIL import Image
 

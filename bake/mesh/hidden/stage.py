@@ -472,6 +472,17 @@ def stage(scene: Scene, section: HiddenJob) -> tuple[Scene, StageRecord]:
         proof["pictures"] = proof_mod.pictures(scene, vis, keep, held, views, px["wrong_per_eye"],
                                                cfg.holdout_pixels, min(cfg.pictures, len(held)),
                                                two_sided=sided, see_through=clear)
+        if trim_info is not None:  # what is written (whole sources, redrawn outlines) against the model
+            def vis_of(sc: Scene) -> Visibility:
+                return Visibility(sc.positions, sc.triangles, two_sided=two_sided(sc, cfg.back_faces),
+                                  see_through=see_through(sc)[0], threads=cfg.threads)
+
+            differ, shown = proof_mod.depths_differ(vis_of(original), vis_of(out), held, views,
+                                                    TRIM_EPS * original.scale())
+            proof["written_vs_model"] = {"pixels_differ": differ, "pixels_showing": shown}
+            if differ:
+                rec.warn(f"trimming: {differ:,} of {shown:,} held-out pixels show the written triangles at another "
+                         "depth than the model's (or one shows nothing there)")
         proof["seconds"] = round(time.perf_counter() - t1, 6)
         if px["covered"] == 0:
             rec.warn("the held-out eyes saw none of the model (no pixel shows it): the proof measured nothing; "

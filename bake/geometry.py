@@ -1,5 +1,6 @@
-"""Small geometric steps shared by the stages that cut polygons by planes (the BSP's splits,
-``bake/bsp/split.py``, and the hidden stage's trimming, ``bake/mesh/hidden/trim.py``)."""
+"""Small geometric steps shared by the stages: cutting polygons by planes (the BSP's splits,
+``bake/bsp/split.py``, and the hidden stage's trimming, ``bake/mesh/hidden/trim.py``) and the
+tangents of a direction (the textures' texel samples, the hidden stage's eyes and rays)."""
 
 from __future__ import annotations
 
@@ -36,4 +37,15 @@ def corners_at(x: np.ndarray, i: np.ndarray) -> np.ndarray:
     return np.take_along_axis(x, i[..., None], axis=1)
 
 
-__all__ = ["edge_crossings", "corners_at"]
+def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two tangents per unit normal (P, 3) (deterministic): the first is unit, the cross product
+    of the normal with x (or with y when the normal is close to x); the second, normal x first."""
+    n = np.asarray(normals, dtype=np.float64)
+    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(n, helper)
+    ln = np.linalg.norm(t, axis=1)
+    t = np.divide(t, ln[:, None], out=np.tile([[1.0, 0.0, 0.0]], (len(n), 1)), where=ln[:, None] > 0)
+    return t, np.cross(n, t)
+
+
+__all__ = ["edge_crossings", "corners_at", "tangent_frames"]

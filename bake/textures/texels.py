@@ -22,6 +22,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..geometry import tangent_frames
 from ..scene import Scene
 from .atlas import Atlas, cross2
 
@@ -213,16 +214,6 @@ def texel_samples(scene: Scene, atlas: Atlas, *, supersample: int = 2, push: boo
             raise ValueError("push=True needs a ray tracer (bake.lighting.rays.Tracer)")
         out.points, out.pushed = push_out(out.points, out.normals, out.texel_size[out.tri_ids], tracer)
     return out
-
-
-def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents per unit normal (deterministic)."""
-    n = np.asarray(normals, dtype=np.float64)
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t = np.cross(n, helper)
-    ln = np.linalg.norm(t, axis=1)
-    t = np.divide(t, ln[:, None], out=np.tile([[1.0, 0.0, 0.0]], (len(n), 1)), where=ln[:, None] > 0)
-    return t, np.cross(n, t)
 
 
 def push_out(points: np.ndarray, normals: np.ndarray, radius: np.ndarray, tracer, *,

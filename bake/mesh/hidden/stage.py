@@ -42,6 +42,7 @@ import numpy as np
 
 from ...config import HiddenConfig, LightingConfig
 from ...errors import ConfigError
+from ...geometry import tangent_frames
 from ...record import ReportSection, StageRecord
 from ...scene import Material, Scene
 from ...scratch.numbers import position_decimals
@@ -218,11 +219,8 @@ MAX_LEVEL = 8  # a kept triangle's points for the casters: at most an 8 x 8 cut 
 
 
 def _unit_perp(w: np.ndarray, turn: float) -> np.ndarray:
-    a = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t = np.cross(w, a)
-    t /= np.linalg.norm(t)
-    b = np.cross(w, t)
-    return np.cos(2 * np.pi * turn) * t + np.sin(2 * np.pi * turn) * b
+    t, b = tangent_frames(w[None, :])
+    return np.cos(2 * np.pi * turn) * t[0] + np.sin(2 * np.pi * turn) * b[0]
 
 
 # rounds at the edges of what shows: eyes near the witnesses of the seen neighbours (docs/hidden.md)
@@ -274,10 +272,7 @@ def directed_eyes(regs, witness: np.ndarray, corners: np.ndarray, seen: np.ndarr
         u = W[o] - centre
         dist = np.linalg.norm(u, axis=1, keepdims=True)
         u = u / dist
-        a = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-        t = np.cross(u, a)
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        bb = np.cross(u, t)
+        t, bb = tangent_frames(u)
         phi = 2 * np.pi * (j[o] * GOLDEN_TURN + r2[o])
         v = u + np.tan(DIRECTED_TURN * rad[o])[:, None] * (np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * bb)
         out[o] = centre + dist * v / np.linalg.norm(v, axis=1, keepdims=True)

@@ -30,6 +30,7 @@ import threading
 
 import numpy as np
 
+from ...geometry import tangent_frames
 from ...lighting.rays import CHUNK_RAYS, Tracer, parallel
 
 MAX_CHAIN = 64  # continuations through see-through and culled triangles, per ray
@@ -373,10 +374,7 @@ class Visibility:
 
     @staticmethod
     def _cosine(n: np.ndarray, r1: np.ndarray, r2: np.ndarray) -> np.ndarray:
-        a = np.where(np.abs(n[:, 0:1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-        t = np.cross(n, a)
-        t /= np.linalg.norm(t, axis=1, keepdims=True)
-        b = np.cross(n, t)
+        t, b = tangent_frames(n)
         s, phi = np.sqrt(r1), 2 * np.pi * r2
         z = np.sqrt(np.clip(1 - r1, 0, 1))
         return (s * np.cos(phi))[:, None] * t + (s * np.sin(phi))[:, None] * b + z[:, None] * n

@@ -60,12 +60,19 @@ def test_pictures_show_what_a_zbuffer_shows_with_and_without_the_dropped_triangl
 
 
 def test_pictures_put_the_worst_eyes_first():
+    """One eye with one ray per triangle drops faces the held-out eyes see: the first picture is
+    of an eye with wrong pixels, the most of those pictured; the eyes to picture are those with
+    wrong pixels (most first), then eyes spread over the rest (not the first few, all near one
+    pole); ``pictures = 0`` pictures none."""
     s = scene_of(box([-1, -1, -1], [1, 1, 1]), box([1.5, -0.5, -0.5], [2.5, 0.5, 0.5]))
     out, rec = run(s, eyes=1, samples=1, refine=0, seed=3, holdout_eyes=24, holdout_pixels=24, pictures=2)
     h = rec.details["holdout"]
-    assert len(h["pictures"]) == 2
-    if h["wrong_pixels"]:
-        assert h["pictures"][0]["wrong_pixels"] == max(p["wrong_pixels"] for p in h["pictures"]) > 0
+    assert len(h["pictures"]) == 2 and h["wrong_pixels"] > 0
+    assert h["pictures"][0]["wrong_pixels"] == max(p["wrong_pixels"] for p in h["pictures"]) > 0
+    wrong = np.zeros(12, np.int64)
+    wrong[[7, 2]] = [3, 9]
+    assert proof._choose(wrong, 4).tolist() == [2, 7, 1, 4]  # the two with wrong pixels, then spread
+    assert proof._choose(np.zeros(12, np.int64), 3).tolist() == [2, 6, 10]
     _, rec = run(s, holdout_eyes=8, pictures=0)
     assert rec.details["holdout"]["pictures"] == []
 

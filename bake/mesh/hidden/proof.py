@@ -116,8 +116,9 @@ def _choose(wrong: np.ndarray, count: int) -> np.ndarray:
     bad = np.flatnonzero(wrong > 0)
     bad = bad[np.lexsort((bad, -wrong[bad]))]
     spread = (np.arange(count) * n) // max(count, 1) + n // (2 * max(count, 1))
-    rest = [int(i) for i in spread if i not in set(bad.tolist())]
-    rest += [i for i in range(n) if i not in set(rest) and i not in set(bad.tolist())]
+    taken = set(bad.tolist())
+    rest = [int(i) for i in spread if int(i) not in taken]
+    rest += [i for i in range(n) if i not in taken and i not in rest]
     return np.array((bad.tolist() + rest)[:count], np.int64)
 
 
